@@ -1,0 +1,117 @@
+//! Components of the particle world. Every particle quantity is its own component so a
+//! stage borrows exactly the columns it reads and writes; hecs stores each archetype's
+//! components as contiguous columns, which the hot loops borrow as slices
+//! ([`crate::world::columns`]).
+
+use glam::DVec2;
+
+macro_rules! component {
+    ($(#[$doc:meta])* $name:ident($ty:ty)) => {
+        $(#[$doc])*
+        #[derive(Clone, Copy, Debug, Default, PartialEq)]
+        #[repr(transparent)]
+        pub struct $name(pub $ty);
+    };
+}
+
+component!(
+    /// Particle position x [m].
+    Position(DVec2)
+);
+component!(
+    /// Particle velocity v [m/s] at the current (integer) time level.
+    Velocity(DVec2)
+);
+component!(
+    /// Density rho [kg/m^3].
+    Density(f64)
+);
+component!(
+    /// Pressure p [Pa], from the equation of state.
+    Pressure(f64)
+);
+component!(
+    /// Particle mass m [kg]; constant.
+    Mass(f64)
+);
+component!(
+    /// dv/dt from the momentum equation [m/s^2]; written by the forces stage.
+    Acceleration(DVec2)
+);
+component!(
+    /// d rho / dt from the continuity equation [kg/m^3/s]; written by the density stage.
+    DensityRate(f64)
+);
+component!(
+    /// Number of neighbours within the kernel support (fluid and ghost), self excluded.
+    NeighbourCount(u32)
+);
+component!(
+    /// Stable identity of a fluid particle (its index at creation), kept when the
+    /// particle columns are reordered.
+    ParticleId(u32)
+);
+
+/// Marker of fluid particles: the integrated particles.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Fluid;
+
+/// A ghost particle: the mirror image of fluid particle `source` (its index in the
+/// fluid columns) across one wall, or two walls at a corner. Ghosts live in their own
+/// archetype and are reused from step to step.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Ghost {
+    pub source: u32,
+}
+
+/// A straight wall segment from `a` to `b`; the fluid lies on its left
+/// (the inward normal is the direction a->b turned 90 degrees counter-clockwise).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Wall {
+    pub name: String,
+    pub a: DVec2,
+    pub b: DVec2,
+}
+
+impl Wall {
+    /// Unit normal pointing into the fluid.
+    pub fn normal(&self) -> DVec2 {
+        (self.b - self.a).perp().normalize_or_zero()
+    }
+    /// Unit tangent from a to b.
+    pub fn tangent(&self) -> DVec2 {
+        (self.b - self.a).normalize_or_zero()
+    }
+    /// Signed distance of `x` from the wall's line, positive on the fluid side.
+    pub fn distance(&self, x: DVec2) -> f64 {
+        (x - self.a).dot(self.normal())
+    }
+    /// Abscissa of the projection of `x` along the wall, 0 at `a`, |b-a| at `b`.
+    pub fn abscissa(&self, x: DVec2) -> f64 {
+        (x - self.a).dot(self.tangent())
+    }
+    pub fn length(&self) -> f64 {
+        (self.b - self.a).length()
+    }
+    /// Mirror image of `x` across the wall's line.
+    pub fn mirror(&self, x: DVec2) -> DVec2 {
+        x - 2.0 * self.distance(x) * self.normal()
+    }
+}
+
+/// Where a wall sensor's pressure is read: point `at` on wall `wall`, over a width
+/// `width` along the wall (Method III's pseudo-sensor).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PressureSensor {
+    pub name: String,
+    pub at: DVec2,
+    pub wall: usize,
+    pub width: f64,
+}
+
+/// A wave gauge: free-surface elevation on the vertical line x = `x`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WaveGauge {
+    pub name: String,
+    pub x: f64,
+}

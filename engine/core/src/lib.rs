@@ -1,0 +1,21 @@
+//! Core of the WCSPH engine: the particle world and its components, the stage trait and
+//! registry, the scenario loader, the runner with its profiling, and the output writers.
+//! The standard stages live in the `sph-stages` crate; the `engine` binary joins them.
+
+pub mod components;
+pub mod frame;
+pub mod kernel;
+pub mod output;
+pub mod overrides;
+pub mod registry;
+pub mod runner;
+pub mod scenario;
+pub mod series;
+pub mod sim;
+pub mod stage;
+pub mod world;
+
+pub use registry::StageRegistry;
+pub use scenario::{LoadError, Scenario};
+pub use sim::Sim;
+pub use stage::{SetupError, Stage, StepError};

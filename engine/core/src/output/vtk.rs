@@ -1,0 +1,471 @@
+//! ParaView particle frames: VTK XML PolyData (`.vtp`, inline base64 binary) and a `.pvd` time index.
+
+use std::fmt::Write as _;
+use std::io;
+use std::path::{Path, PathBuf};
+
+use glam::DVec2;
+
+use super::atomic::write_atomic;
+
+/// Per-particle arrays of one frame; every non-empty array has one entry per position.
+pub struct FrameFields<'a> {
+    pub positions: &'a [DVec2],
+    pub velocity: &'a [DVec2],
+    pub density: &'a [f64],
+    pub pressure: &'a [f64],
+    /// May be empty: then the array is omitted.
+    pub neighbours: &'a [u32],
+    /// More named point arrays.
+    pub extra_scalars: &'a [(&'a str, &'a [f64])],
+}
+
+/// Writes one frame as a `.vtp` file (points at z = 0, one vertex cell per point), atomically.
+///
+/// Fails with `InvalidInput` if an array length differs from the number of positions.
+pub fn write_vtp(path: &Path, f: &FrameFields) -> io::Result<()> {
+    let bytes = vtp_document(f)?;
+    write_atomic(path, bytes.as_bytes())
+}
+
+fn vtp_document(f: &FrameFields) -> io::Result<String> {
+    let n = f.positions.len();
+    check_len("velocity", f.velocity.len(), n)?;
+    check_len("density", f.density.len(), n)?;
+    check_len("pressure", f.pressure.len(), n)?;
+    if !f.neighbours.is_empty() {
+        check_len("neighbours", f.neighbours.len(), n)?;
+    }
+    for (name, values) in f.extra_scalars {
+        check_len(name, values.len(), n)?;
+    }
+    let n_i32 = i32::try_from(n).map_err(|_| invalid(format!("too many points: {n}")))?;
+
+    // Base64 output is 4/3 of the input; ~80 bytes per point for the fixed arrays.
+    let mut s = String::with_capacity(1024 + n * (110 + 11 * f.extra_scalars.len()));
+    s.push_str("<?xml version=\"1.0\"?>\n");
+    s.push_str(
+        "<VTKFile type=\"PolyData\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt32\">\n",
+    );
+    s.push_str("  <PolyData>\n");
+    let _ = writeln!(
+        s,
+        "    <Piece NumberOfPoints=\"{n}\" NumberOfVerts=\"{n}\" NumberOfLines=\"0\" NumberOfStrips=\"0\" NumberOfPolys=\"0\">"
+    );
+
+    s.push_str("      <PointData Scalars=\"pressure\" Vectors=\"velocity\">\n");
+    let mut buf = Vec::with_capacity(n * 24);
+    buf.extend(
+        f.velocity
+            .iter()
+            .flat_map(|v| [v.x, v.y, 0.0])
+            .flat_map(f64::to_le_bytes),
+    );
+    data_array(&mut s, "Float64", "velocity", 3, &buf)?;
+    float_array(&mut s, &mut buf, "density", f.density)?;
+    float_array(&mut s, &mut buf, "pressure", f.pressure)?;
+    if !f.neighbours.is_empty() {
+        buf.clear();
+        buf.extend(f.neighbours.iter().flat_map(|v| v.to_le_bytes()));
+        data_array(&mut s, "UInt32", "neighbours", 1, &buf)?;
+    }
+    for (name, values) in f.extra_scalars {
+        float_array(&mut s, &mut buf, &xml_escape(name), values)?;
+    }
+    s.push_str("      </PointData>\n");
+
+    s.push_str("      <Points>\n");
+    buf.clear();
+    buf.extend(
+        f.positions
+            .iter()
+            .flat_map(|p| [p.x, p.y, 0.0])
+            .flat_map(f64::to_le_bytes),
+    );
+    data_array(&mut s, "Float64", "Points", 3, &buf)?;
+    s.push_str("      </Points>\n");
+
+    s.push_str("      <Verts>\n");
+    buf.clear();
+    buf.extend((0..n_i32).flat_map(i32::to_le_bytes));
+    data_array(&mut s, "Int32", "connectivity", 1, &buf)?;
+    buf.clear();
+    buf.extend((1..=n_i32).flat_map(i32::to_le_bytes));
+    data_array(&mut s, "Int32", "offsets", 1, &buf)?;
+    s.push_str("      </Verts>\n");
+
+    s.push_str("    </Piece>\n  </PolyData>\n</VTKFile>\n");
+    Ok(s)
+}
+
+fn float_array(s: &mut String, buf: &mut Vec<u8>, name: &str, values: &[f64]) -> io::Result<()> {
+    buf.clear();
+    buf.extend(values.iter().flat_map(|v| v.to_le_bytes()));
+    data_array(s, "Float64", name, 1, buf)
+}
+
+/// One `<DataArray format="binary">`: base64 of (UInt32 byte count ++ raw little-endian data).
+fn data_array(
+    s: &mut String,
+    ty: &str,
+    name: &str,
+    components: u32,
+    data: &[u8],
+) -> io::Result<()> {
+    let len =
+        u32::try_from(data.len()).map_err(|_| invalid(format!("array {name} exceeds 4 GiB")))?;
+    let _ = write!(
+        s,
+        "        <DataArray type=\"{ty}\" Name=\"{name}\" NumberOfComponents=\"{components}\" format=\"binary\">"
+    );
+    let mut encoder = Base64::default();
+    encoder.push(s, &len.to_le_bytes());
+    encoder.push(s, data);
+    encoder.finish(s);
+    s.push_str("</DataArray>\n");
+    Ok(())
+}
+
+/// Streaming standard base64 (RFC 4648, with padding).
+#[derive(Default)]
+struct Base64 {
+    pending: [u8; 3],
+    n_pending: usize,
+}
+
+const B64: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+
+impl Base64 {
+    fn push(&mut self, out: &mut String, mut data: &[u8]) {
+        if self.n_pending > 0 {
+            while self.n_pending < 3 {
+                let Some((&b, rest)) = data.split_first() else {
+                    return;
+                };
+                self.pending[self.n_pending] = b;
+                self.n_pending += 1;
+                data = rest;
+            }
+            let p = self.pending;
+            encode_triple(out, p[0], p[1], p[2], 4);
+            self.n_pending = 0;
+        }
+        let mut chunks = data.chunks_exact(3);
+        for c in &mut chunks {
+            encode_triple(out, c[0], c[1], c[2], 4);
+        }
+        let rest = chunks.remainder();
+        self.pending[..rest.len()].copy_from_slice(rest);
+        self.n_pending = rest.len();
+    }
+
+    fn finish(self, out: &mut String) {
+        let p = self.pending;
+        match self.n_pending {
+            1 => encode_triple(out, p[0], 0, 0, 2),
+            2 => encode_triple(out, p[0], p[1], 0, 3),
+            _ => return,
+        }
+        for _ in self.n_pending..3 {
+            out.push('=');
+        }
+    }
+}
+
+/// Appends the first `chars` base64 characters of the 24-bit group `a b c`.
+fn encode_triple(out: &mut String, a: u8, b: u8, c: u8, chars: usize) {
+    let v = (u32::from(a) << 16) | (u32::from(b) << 8) | u32::from(c);
+    for i in 0..chars {
+        out.push(char::from(B64[((v >> (18 - 6 * i)) & 63) as usize]));
+    }
+}
+
+fn check_len(name: &str, len: usize, n: usize) -> io::Result<()> {
+    if len == n {
+        Ok(())
+    } else {
+        Err(invalid(format!(
+            "array {name} has {len} entries, expected {n}"
+        )))
+    }
+}
+
+fn invalid(msg: String) -> io::Error {
+    io::Error::new(io::ErrorKind::InvalidInput, msg)
+}
+
+fn xml_escape(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&apos;"),
+            _ => out.push(c),
+        }
+    }
+    out
+}
+
+/// A ParaView `.pvd` collection listing frames by time; rewritten atomically on every push.
+pub struct PvdIndex {
+    path: PathBuf,
+    entries: Vec<(f64, String)>,
+}
+
+impl PvdIndex {
+    /// An empty index to be written at `path` (nothing is written until the first push).
+    pub fn new(path: PathBuf) -> Self {
+        Self {
+            path,
+            entries: Vec::new(),
+        }
+    }
+
+    /// Adds (time, file name relative to the pvd's folder) and rewrites the .pvd.
+    pub fn push(&mut self, time: f64, file: &str) -> io::Result<()> {
+        if !time.is_finite() {
+            return Err(invalid(format!("non-finite frame time {time} for {file}")));
+        }
+        self.entries.push((time, file.to_owned()));
+        write_atomic(&self.path, self.document().as_bytes())
+    }
+
+    /// Path of the `.pvd` file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Frames pushed so far, as (time, file).
+    pub fn entries(&self) -> &[(f64, String)] {
+        &self.entries
+    }
+
+    fn document(&self) -> String {
+        let mut s = String::with_capacity(200 + 80 * self.entries.len());
+        s.push_str("<?xml version=\"1.0\"?>\n");
+        s.push_str("<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n");
+        s.push_str("  <Collection>\n");
+        for (time, file) in &self.entries {
+            let _ = writeln!(
+                s,
+                "    <DataSet timestep=\"{time}\" group=\"\" part=\"0\" file=\"{}\"/>",
+                xml_escape(file)
+            );
+        }
+        s.push_str("  </Collection>\n</VTKFile>\n");
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::fs;
+
+    fn test_dir(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("sph_core_vtk_{name}_{}", std::process::id()));
+        let _ = fs::remove_dir_all(&dir);
+        fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    fn b64_decode(s: &str) -> Vec<u8> {
+        let val = |c: u8| B64.iter().position(|&x| x == c).unwrap() as u32;
+        let mut out = Vec::new();
+        for q in s.as_bytes().chunks(4) {
+            let pad = q.iter().filter(|&&c| c == b'=').count();
+            let v = q.iter().fold(0u32, |acc, &c| {
+                (acc << 6) | if c == b'=' { 0 } else { val(c) }
+            });
+            out.extend_from_slice(&v.to_be_bytes()[1..4 - pad]);
+        }
+        out
+    }
+
+    /// Decoded payload (after the UInt32 header) of the DataArray called `name`.
+    fn array_payload(doc: &str, name: &str) -> Vec<u8> {
+        let tag = format!("Name=\"{name}\"");
+        let start = doc.find(&tag).unwrap();
+        let body_start = start + doc[start..].find('>').unwrap() + 1;
+        let body_end = body_start + doc[body_start..].find("</DataArray>").unwrap();
+        let bytes = b64_decode(&doc[body_start..body_end]);
+        let header = u32::from_le_bytes(bytes[..4].try_into().unwrap()) as usize;
+        assert_eq!(header, bytes.len() - 4, "byte-count header of {name}");
+        bytes[4..].to_vec()
+    }
+
+    fn f64s(bytes: &[u8]) -> Vec<f64> {
+        bytes
+            .chunks(8)
+            .map(|c| f64::from_le_bytes(c.try_into().unwrap()))
+            .collect()
+    }
+
+    #[test]
+    fn base64_matches_rfc4648_vectors() {
+        for (input, expected) in [
+            ("", ""),
+            ("f", "Zg=="),
+            ("fo", "Zm8="),
+            ("foo", "Zm9v"),
+            ("foob", "Zm9vYg=="),
+            ("fooba", "Zm9vYmE="),
+            ("foobar", "Zm9vYmFy"),
+        ] {
+            // Split pushes exercise the carry-over between calls.
+            for split in 0..=input.len() {
+                let mut out = String::new();
+                let mut e = Base64::default();
+                e.push(&mut out, &input.as_bytes()[..split]);
+                e.push(&mut out, &input.as_bytes()[split..]);
+                e.finish(&mut out);
+                assert_eq!(out, expected, "input {input:?} split {split}");
+                assert_eq!(b64_decode(&out), input.as_bytes());
+            }
+        }
+    }
+
+    #[test]
+    fn three_point_frame_and_pvd() {
+        let dir = test_dir("frame");
+        let positions = [
+            DVec2::new(0.0, 0.0),
+            DVec2::new(1.0, 0.5),
+            DVec2::new(2.0, -1.0),
+        ];
+        let velocity = [DVec2::new(0.1, 0.2), DVec2::ZERO, DVec2::new(-3.0, 4.0)];
+        let density = [1000.0, 1001.5, 999.0];
+        let pressure = [0.0, 10.0, -5.0];
+        let neighbours = [2, 3, 1];
+        let vorticity = [0.5, 0.25, 0.125];
+        let frame = FrameFields {
+            positions: &positions,
+            velocity: &velocity,
+            density: &density,
+            pressure: &pressure,
+            neighbours: &neighbours,
+            extra_scalars: &[("vorticity", &vorticity)],
+        };
+        let path = dir.join("frame_0000.vtp");
+        write_vtp(&path, &frame).unwrap();
+        let doc = fs::read_to_string(&path).unwrap();
+
+        assert!(doc.contains("NumberOfPoints=\"3\""));
+        assert!(doc.contains("NumberOfVerts=\"3\""));
+        for name in [
+            "velocity",
+            "density",
+            "pressure",
+            "neighbours",
+            "vorticity",
+            "Points",
+            "connectivity",
+            "offsets",
+        ] {
+            assert!(
+                doc.contains(&format!("Name=\"{name}\"")),
+                "missing array {name}"
+            );
+        }
+        for tag in [
+            "VTKFile",
+            "PolyData",
+            "Piece",
+            "PointData",
+            "Points",
+            "Verts",
+            "DataArray",
+        ] {
+            let opens =
+                doc.matches(&format!("<{tag}>")).count() + doc.matches(&format!("<{tag} ")).count();
+            let closes = doc.matches(&format!("</{tag}>")).count();
+            assert_eq!(opens, closes, "unbalanced <{tag}>");
+            assert!(opens > 0);
+        }
+        assert_eq!(doc.matches("<DataArray ").count(), 8);
+
+        assert_eq!(
+            f64s(&array_payload(&doc, "Points")),
+            [0.0, 0.0, 0.0, 1.0, 0.5, 0.0, 2.0, -1.0, 0.0]
+        );
+        assert_eq!(
+            f64s(&array_payload(&doc, "velocity"))[6..],
+            [-3.0, 4.0, 0.0]
+        );
+        assert_eq!(f64s(&array_payload(&doc, "pressure")), pressure);
+        assert_eq!(f64s(&array_payload(&doc, "vorticity")), vorticity);
+        assert_eq!(
+            array_payload(&doc, "neighbours"),
+            [2, 0, 0, 0, 3, 0, 0, 0, 1, 0, 0, 0]
+        );
+        assert_eq!(
+            array_payload(&doc, "offsets"),
+            [1, 0, 0, 0, 2, 0, 0, 0, 3, 0, 0, 0]
+        );
+
+        let mut pvd = PvdIndex::new(dir.join("run.pvd"));
+        pvd.push(0.0, "frame_0000.vtp").unwrap();
+        pvd.push(0.25, "frame_0001.vtp").unwrap();
+        let index = fs::read_to_string(dir.join("run.pvd")).unwrap();
+        assert!(index.contains("type=\"Collection\""));
+        assert!(index.contains("timestep=\"0\" group=\"\" part=\"0\" file=\"frame_0000.vtp\""));
+        assert!(index.contains("timestep=\"0.25\" group=\"\" part=\"0\" file=\"frame_0001.vtp\""));
+        assert_eq!(index.matches("<DataSet ").count(), 2);
+        assert!(pvd.push(f64::NAN, "bad.vtp").is_err());
+        assert_eq!(pvd.entries().len(), 2);
+
+        // Only the finished files remain: no temporaries.
+        let mut names: Vec<_> = fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        names.sort();
+        assert_eq!(names, ["frame_0000.vtp", "run.pvd"]);
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn optional_neighbours_and_length_checks() {
+        let positions = [DVec2::ZERO, DVec2::ONE];
+        let v = [DVec2::ZERO; 2];
+        let s = [1.0, 2.0];
+        let mut frame = FrameFields {
+            positions: &positions,
+            velocity: &v,
+            density: &s,
+            pressure: &s,
+            neighbours: &[],
+            extra_scalars: &[],
+        };
+        let doc = vtp_document(&frame).unwrap();
+        assert!(!doc.contains("neighbours"));
+        assert_eq!(doc.matches("<DataArray ").count(), 6);
+
+        frame.density = &s[..1];
+        let err = vtp_document(&frame).unwrap_err();
+        assert_eq!(err.kind(), io::ErrorKind::InvalidInput);
+        frame.density = &s;
+        let short = [1.0];
+        let extras: [(&str, &[f64]); 1] = [("x", &short)];
+        frame.extra_scalars = &extras;
+        assert!(vtp_document(&frame).is_err());
+    }
+
+    #[test]
+    fn empty_frame_is_valid() {
+        let frame = FrameFields {
+            positions: &[],
+            velocity: &[],
+            density: &[],
+            pressure: &[],
+            neighbours: &[],
+            extra_scalars: &[],
+        };
+        let doc = vtp_document(&frame).unwrap();
+        assert!(doc.contains("NumberOfPoints=\"0\""));
+        assert!(array_payload(&doc, "Points").is_empty());
+    }
+}

@@ -1,0 +1,138 @@
+//! The stage registry: stage names mapped to constructors that parse their own typed
+//! parameters straight from the scenario file, so a parameter error carries the
+//! file's line and column. Plugins add stages with [`StageRegistry::register`].
+
+use crate::stage::Stage;
+use serde::de::DeserializeOwned;
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+/// Builds a stage from its parameters; also returns the parameters, resolved (every
+/// default filled in), as RON text for the run's resolved scenario copy.
+type Constructor = Box<
+    dyn Fn(
+            &mut dyn erased_serde::Deserializer,
+        ) -> Result<(Box<dyn Stage>, String), erased_serde::Error>
+        + Send
+        + Sync,
+>;
+
+struct Entry {
+    build: Constructor,
+    summary: &'static str,
+}
+
+/// Maps snake_case stage names to constructors. Cloning is cheap (entries are shared).
+#[derive(Default, Clone)]
+pub struct StageRegistry {
+    entries: BTreeMap<String, Arc<Entry>>,
+}
+
+/// A stage built from a scenario's pipeline entry.
+pub struct BuiltStage {
+    pub stage: Box<dyn Stage>,
+    /// The stage's parameters with every default filled in, as a RON struct `(..)`.
+    pub resolved_params: String,
+}
+
+impl StageRegistry {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Registers stage `name` (snake_case; written `CamelCase(...)` in scenario files).
+    /// `P` is the stage's parameter struct: give it `#[serde(default, deny_unknown_fields)]`
+    /// so omitted fields take documented defaults and misspelt ones are refused.
+    /// `build` may reject out-of-range values with a message naming the field.
+    pub fn register<P, S>(
+        &mut self,
+        name: &str,
+        summary: &'static str,
+        build: impl Fn(P) -> Result<S, String> + Send + Sync + 'static,
+    ) where
+        P: DeserializeOwned + Serialize + 'static,
+        S: Stage + 'static,
+    {
+        let ctor: Constructor = Box::new(move |de| {
+            let params: P = erased_serde::deserialize(de)?;
+            let resolved = ron::to_string(&params).map_err(serde::de::Error::custom)?;
+            let stage = build(params).map_err(serde::de::Error::custom)?;
+            Ok((Box::new(stage) as Box<dyn Stage>, resolved))
+        });
+        self.entries.insert(
+            name.to_string(),
+            Arc::new(Entry {
+                build: ctor,
+                summary,
+            }),
+        );
+    }
+
+    pub fn contains(&self, name: &str) -> bool {
+        self.entries.contains_key(name)
+    }
+
+    /// Registered names with their one-line summaries, sorted.
+    pub fn list(&self) -> impl Iterator<Item = (&str, &'static str)> {
+        self.entries.iter().map(|(k, v)| (k.as_str(), v.summary))
+    }
+
+    /// Builds stage `name` from a deserializer positioned at its parameters.
+    pub(crate) fn build(
+        &self,
+        name: &str,
+        de: &mut dyn erased_serde::Deserializer,
+    ) -> Option<Result<BuiltStage, erased_serde::Error>> {
+        self.entries.get(name).map(|e| {
+            (e.build)(de).map(|(stage, resolved_params)| BuiltStage {
+                stage,
+                resolved_params,
+            })
+        })
+    }
+
+    /// The message for an unknown stage: the known ones and the nearest name.
+    pub fn unknown_message(&self, written: &str) -> String {
+        let snake = snake_case(written);
+        let known: Vec<String> = self.entries.keys().map(|k| camel_case(k)).collect();
+        let nearest = self
+            .entries
+            .keys()
+            .min_by_key(|k| strsim::levenshtein(k, &snake))
+            .map(|k| format!(" (nearest: `{}`)", camel_case(k)))
+            .unwrap_or_default();
+        format!(
+            "unknown stage `{written}`{nearest}; known stages: {}",
+            known.join(", ")
+        )
+    }
+}
+
+/// `NeighbourGrid` -> `neighbour_grid` (already snake_case names pass through).
+pub fn snake_case(name: &str) -> String {
+    let mut out = String::with_capacity(name.len() + 4);
+    for (i, c) in name.chars().enumerate() {
+        if c.is_ascii_uppercase() {
+            if i > 0 {
+                out.push('_');
+            }
+            out.push(c.to_ascii_lowercase());
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}
+
+/// `neighbour_grid` -> `NeighbourGrid`.
+pub fn camel_case(name: &str) -> String {
+    name.split('_')
+        .map(|part| {
+            let mut c = part.chars();
+            c.next().map_or(String::new(), |f| {
+                f.to_ascii_uppercase().to_string() + c.as_str()
+            })
+        })
+        .collect()
+}

@@ -1,0 +1,809 @@
+//! The scenario file: schema, loader and validation.
+//!
+//! A scenario is one RON struct (see docs/scenario.md). Its `pipeline` is a list of
+//! stages written `Name(param: value, ...)`; each stage parses its own parameters
+//! through the [`StageRegistry`], directly from the file, so every error — malformed
+//! RON, unknown stage or field, wrong type, out-of-range value — carries
+//! `file:line:column`, the field and what would be accepted.
+
+use crate::components::{Density, Position, Pressure, Velocity, Wall};
+use crate::components::{Fluid, Mass, ParticleId, PressureSensor, WaveGauge};
+use crate::kernel::KernelKind;
+use crate::overrides::{apply_overrides, Override};
+use crate::registry::{camel_case, snake_case, StageRegistry};
+use crate::sim::{Clock, Constants, Resources, Sim, Tait};
+use crate::stage::Stage;
+use glam::DVec2;
+use serde::de::{
+    self, DeserializeSeed, Deserializer, EnumAccess, MapAccess, VariantAccess, Visitor,
+};
+use serde::{Deserialize, Serialize};
+use std::cell::RefCell;
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// The largest particle count a scenario may ask for; checked before any allocation.
+pub const MAX_PARTICLES: f64 = 20e6;
+
+/// A number that must be > 0.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[serde(transparent)]
+pub struct Positive(pub f64);
+
+impl<'de> Deserialize<'de> for Positive {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let v = f64::deserialize(d)?;
+        if v > 0.0 && v.is_finite() {
+            Ok(Positive(v))
+        } else {
+            Err(de::Error::custom(format!(
+                "{v} is out of range; accepted: a finite number > 0"
+            )))
+        }
+    }
+}
+
+/// Smoothing length as a ratio to the particle spacing, accepted in [0.5, 3].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[serde(transparent)]
+pub struct HOverDx(pub f64);
+
+impl<'de> Deserialize<'de> for HOverDx {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let v = f64::deserialize(d)?;
+        if (0.5..=3.0).contains(&v) {
+            Ok(HOverDx(v))
+        } else {
+            Err(de::Error::custom(format!(
+                "{v} is out of range; accepted: 0.5 to 3.0 (0.7-0.9 for the Gaussian, about 1.2-1.33 for 2h-support kernels)"
+            )))
+        }
+    }
+}
+
+/// Fluid properties.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FluidSpec {
+    /// Reference density rho_0 [kg/m^3]. Default 1000.
+    pub density: Positive,
+    /// Tait exponent gamma. Default 7.
+    pub gamma: Positive,
+    /// Numerical speed of sound c_0 [m/s]. Default: derived as 10 sqrt(2 g H), H the
+    /// tallest fluid block.
+    pub sound_speed: Option<Positive>,
+    /// Gravity [m/s^2]. Default (0, -9.81).
+    pub gravity: (f64, f64),
+}
+
+impl Default for FluidSpec {
+    fn default() -> Self {
+        Self {
+            density: Positive(1000.0),
+            gamma: Positive(7.0),
+            sound_speed: None,
+            gravity: (0.0, -9.81),
+        }
+    }
+}
+
+/// Resolution: one number.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
+pub enum Resolution {
+    /// Particle spacing ds [m].
+    Spacing(Positive),
+    /// Number of particles across the width of the first fluid block.
+    ParticlesAcross(u32),
+}
+
+/// An axis-aligned tank with its bottom-left inner corner at the origin; generates the
+/// walls `left`, `bottom`, `right` and, unless `open_top`, `top`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TankSpec {
+    /// Inner width [m].
+    pub width: Positive,
+    /// Inner height [m].
+    pub height: Positive,
+    /// No roof. Default true.
+    #[serde(default = "yes")]
+    pub open_top: bool,
+}
+
+fn yes() -> bool {
+    true
+}
+
+/// An extra straight wall; the fluid lies on the left of the direction `from` -> `to`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WallSpec {
+    pub name: String,
+    pub from: (f64, f64),
+    pub to: (f64, f64),
+}
+
+/// A rectangle of fluid at rest, filled on a square lattice of spacing ds with
+/// hydrostatic density (analytic.md section 1).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BlockSpec {
+    /// Bottom-left corner [m].
+    pub min: (f64, f64),
+    /// Width and height [m].
+    pub size: (Positive, Positive),
+}
+
+/// A wall pressure sensor.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorSpec {
+    pub name: String,
+    /// Name of the wall it sits on.
+    pub wall: String,
+    /// Sensor centre [m]; must lie on the wall.
+    pub at: (f64, f64),
+    /// Width along the wall [m] used by Method III. Default: 2 h.
+    #[serde(default)]
+    pub width: Option<Positive>,
+}
+
+/// A wave gauge measuring the free-surface elevation on a vertical line.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GaugeSpec {
+    pub name: String,
+    pub x: f64,
+}
+
+/// The scenario file's fields (docs/scenario.md documents each).
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(rename = "Scenario", deny_unknown_fields)]
+pub struct ScenarioSpec {
+    pub name: String,
+    /// Simulated end time [s].
+    pub end_time: Positive,
+    #[serde(default)]
+    pub fluid: FluidSpec,
+    pub resolution: Resolution,
+    /// Default: Wendland.
+    #[serde(default = "default_kernel")]
+    pub kernel: KernelKind,
+    /// h / ds. Default 1.3.
+    #[serde(default = "default_h_over_dx")]
+    pub h_over_dx: HOverDx,
+    #[serde(default)]
+    pub tank: Option<TankSpec>,
+    #[serde(default)]
+    pub walls: Vec<WallSpec>,
+    pub fluid_blocks: Vec<BlockSpec>,
+    #[serde(default)]
+    pub pressure_sensors: Vec<SensorSpec>,
+    #[serde(default)]
+    pub wave_gauges: Vec<GaugeSpec>,
+    /// The ordered stages; see [`PipelineEntry`].
+    #[serde(skip_serializing)]
+    pub pipeline: Vec<PipelineEntry>,
+}
+
+fn default_kernel() -> KernelKind {
+    KernelKind::Wendland
+}
+fn default_h_over_dx() -> HOverDx {
+    HOverDx(1.3)
+}
+
+/// One stage of the pipeline, as built from the file.
+pub struct PipelineEntry {
+    pub name: String,
+    /// Run this stage every `every` steps (written `every: N` among the stage's
+    /// parameters; default 1).
+    pub every: u32,
+    pub stage: Box<dyn Stage>,
+    resolved: String,
+}
+
+impl fmt::Debug for PipelineEntry {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}{}", camel_case(&self.name), self.resolved)
+    }
+}
+
+thread_local! {
+    /// The registry the pipeline entries of the file being loaded are built with.
+    static REGISTRY: RefCell<Option<StageRegistry>> = const { RefCell::new(None) };
+}
+
+impl<'de> Deserialize<'de> for PipelineEntry {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        d.deserialize_enum("Stage", &[], EntryVisitor)
+    }
+}
+
+struct EntryVisitor;
+
+impl<'de> Visitor<'de> for EntryVisitor {
+    type Value = PipelineEntry;
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        write!(
+            f,
+            "a stage written `Name(param: value, ...)`, e.g. `NeighbourGrid()`"
+        )
+    }
+    fn visit_enum<A: EnumAccess<'de>>(self, data: A) -> Result<PipelineEntry, A::Error> {
+        let (written, variant) = data.variant_seed(Identifier)?;
+        let name = snake_case(&written);
+        let registry = REGISTRY
+            .with(|r| r.borrow().clone())
+            .ok_or_else(|| de::Error::custom("no stage registry"))?;
+        if !registry.contains(&name) {
+            return Err(de::Error::custom(registry.unknown_message(&written)));
+        }
+        variant.struct_variant(&[], ParamsVisitor { name, registry })
+    }
+}
+
+/// Reads a bare identifier (a stage name).
+struct Identifier;
+
+impl<'de> DeserializeSeed<'de> for Identifier {
+    type Value = String;
+    fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<String, D::Error> {
+        d.deserialize_identifier(self)
+    }
+}
+
+impl Visitor<'_> for Identifier {
+    type Value = String;
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        write!(f, "a stage name")
+    }
+    fn visit_str<E: de::Error>(self, v: &str) -> Result<String, E> {
+        Ok(v.to_string())
+    }
+}
+
+struct ParamsVisitor {
+    name: String,
+    registry: StageRegistry,
+}
+
+impl<'de> Visitor<'de> for ParamsVisitor {
+    type Value = PipelineEntry;
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        write!(f, "the parameters of stage `{}`", camel_case(&self.name))
+    }
+    fn visit_map<A: MapAccess<'de>>(self, map: A) -> Result<PipelineEntry, A::Error> {
+        let mut filtered = EveryFilter {
+            inner: map,
+            every: None,
+        };
+        let built = {
+            let de = de::value::MapAccessDeserializer::new(&mut filtered);
+            let mut erased = <dyn erased_serde::Deserializer>::erase(de);
+            self.registry.build(&self.name, &mut erased)
+        };
+        let built = match built {
+            Some(Ok(b)) => b,
+            Some(Err(e)) => return Err(de::Error::custom(e)),
+            None => return Err(de::Error::custom(self.registry.unknown_message(&self.name))),
+        };
+        let every = filtered.every.unwrap_or(1);
+        Ok(PipelineEntry {
+            name: self.name,
+            every,
+            stage: built.stage,
+            resolved: built.resolved_params,
+        })
+    }
+}
+
+/// Passes a stage's parameters through, taking out the runner's own `every: N`.
+struct EveryFilter<A> {
+    inner: A,
+    every: Option<u32>,
+}
+
+impl<'de, A: MapAccess<'de>> MapAccess<'de> for &mut EveryFilter<A> {
+    type Error = A::Error;
+    fn next_key_seed<K: DeserializeSeed<'de>>(
+        &mut self,
+        seed: K,
+    ) -> Result<Option<K::Value>, A::Error> {
+        loop {
+            let Some(key) = self.inner.next_key::<String>()? else {
+                return Ok(None);
+            };
+            if key == "every" {
+                let n: u32 = self.inner.next_value()?;
+                if n == 0 {
+                    return Err(de::Error::custom(
+                        "`every` is out of range; accepted: 1 or more steps",
+                    ));
+                }
+                self.every = Some(n);
+                continue;
+            }
+            return seed
+                .deserialize(de::value::StringDeserializer::new(key))
+                .map(Some);
+        }
+    }
+    fn next_value_seed<V: DeserializeSeed<'de>>(&mut self, seed: V) -> Result<V::Value, A::Error> {
+        self.inner.next_value_seed(seed)
+    }
+}
+
+/// A scenario that failed to load: where, which field, what is accepted.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoadError {
+    pub file: String,
+    /// 1-based; 0 when the error is not tied to a place in the file.
+    pub line: usize,
+    pub column: usize,
+    pub field: Option<String>,
+    pub message: String,
+}
+
+impl fmt::Display for LoadError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.file)?;
+        if self.line > 0 {
+            write!(f, ":{}:{}", self.line, self.column)?;
+        }
+        write!(f, ": ")?;
+        if let Some(field) = &self.field {
+            write!(f, "field `{field}`: ")?;
+        }
+        write!(f, "{}", self.message)
+    }
+}
+
+impl std::error::Error for LoadError {}
+
+/// A loaded, validated scenario with its derived constants.
+#[derive(Debug)]
+pub struct Scenario {
+    pub spec: ScenarioSpec,
+    /// Particle spacing ds [m].
+    pub spacing: f64,
+    /// Smoothing length h [m].
+    pub h: f64,
+    /// Speed of sound c_0 [m/s] (given or derived).
+    pub sound_speed: f64,
+    /// The file it came from.
+    pub source: PathBuf,
+}
+
+/// RON options: `IMPLICIT_SOME` lets optional fields be written without `Some(..)`.
+fn ron_options() -> ron::Options {
+    ron::Options::default().with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME)
+}
+
+impl Scenario {
+    /// Reads, patches with `--set` overrides, parses and validates a scenario file.
+    pub fn load(
+        path: &Path,
+        overrides: &[Override],
+        registry: &StageRegistry,
+    ) -> Result<Self, LoadError> {
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| LoadError {
+            file: file.clone(),
+            line: 0,
+            column: 0,
+            field: None,
+            message: format!("cannot read the scenario file: {e}"),
+        })?;
+        Self::from_str(&text, &file, overrides, registry)
+    }
+
+    /// As [`Scenario::load`], from text; `file` names it in errors.
+    pub fn from_str(
+        text: &str,
+        file: &str,
+        overrides: &[Override],
+        registry: &StageRegistry,
+    ) -> Result<Self, LoadError> {
+        let text = apply_overrides(text, overrides).map_err(|e| LoadError {
+            file: file.to_string(),
+            line: 0,
+            column: 0,
+            field: None,
+            message: e.to_string(),
+        })?;
+        REGISTRY.with(|r| *r.borrow_mut() = Some(registry.clone()));
+        let parsed: Result<ScenarioSpec, _> = ron_options().from_str(&text);
+        REGISTRY.with(|r| *r.borrow_mut() = None);
+        let spec = parsed.map_err(|e| {
+            let (line, column) = (e.span.start.line, e.span.start.col);
+            LoadError {
+                file: file.to_string(),
+                line,
+                column,
+                field: field_before(&text, line, column),
+                message: e.code.to_string(),
+            }
+        })?;
+        let at = |field: &str, message: String| {
+            let (line, column) = locate(&text, field);
+            LoadError {
+                file: file.to_string(),
+                line,
+                column,
+                field: Some(field.to_string()),
+                message,
+            }
+        };
+        validate(spec, &at, PathBuf::from(file))
+    }
+
+    /// The scenario with every default filled in, as RON text.
+    pub fn resolved_ron(&self) -> String {
+        let pretty = ron::ser::PrettyConfig::new().struct_names(true);
+        let body = ron::ser::to_string_pretty(&self.spec, pretty).unwrap_or_default();
+        let stages: Vec<String> = self
+            .spec
+            .pipeline
+            .iter()
+            .map(|p| {
+                let params = p.resolved.trim_start_matches('(').trim_end_matches(')');
+                let every = if p.every != 1 {
+                    format!("every: {}, ", p.every)
+                } else {
+                    String::new()
+                };
+                format!("        {}({every}{params}),", camel_case(&p.name))
+            })
+            .collect();
+        let derived = format!(
+            "// derived: spacing ds = {} m, smoothing length h = {} m, sound speed c_0 = {} m/s\n",
+            self.spacing, self.h, self.sound_speed
+        );
+        match body.rfind(')') {
+            Some(close) => format!(
+                "{derived}{}    pipeline: [\n{}\n    ],\n)\n",
+                &body[..close],
+                stages.join("\n")
+            ),
+            None => body,
+        }
+    }
+
+    /// Walls of the scenario: the tank's then the extra ones.
+    pub fn walls(&self) -> Vec<Wall> {
+        let mut walls = Vec::new();
+        if let Some(t) = &self.spec.tank {
+            let (w, h) = (t.width.0, t.height.0);
+            let wall = |name: &str, a: (f64, f64), b: (f64, f64)| Wall {
+                name: name.to_string(),
+                a: DVec2::new(a.0, a.1),
+                b: DVec2::new(b.0, b.1),
+            };
+            walls.push(wall("left", (0.0, h), (0.0, 0.0)));
+            walls.push(wall("bottom", (0.0, 0.0), (w, 0.0)));
+            walls.push(wall("right", (w, 0.0), (w, h)));
+            if !t.open_top {
+                walls.push(wall("top", (w, h), (0.0, h)));
+            }
+        }
+        for s in &self.spec.walls {
+            walls.push(Wall {
+                name: s.name.clone(),
+                a: s.from.into(),
+                b: s.to.into(),
+            });
+        }
+        walls
+    }
+
+    /// Initial fluid particles: each block filled on a square lattice of spacing ds,
+    /// first row and column ds/2 inside the block, with hydrostatic density
+    /// rho(y) = rho_0 [1 + rho_0 g (H - y)/B]^(1/gamma) and mass rho(y) ds^2 so the
+    /// column starts in equilibrium (analytic.md section 1).
+    pub fn initial_particles(&self) -> Vec<(DVec2, f64, f64)> {
+        let ds = self.spacing;
+        let eos = self.eos();
+        let g = DVec2::from(self.spec.fluid.gravity).length();
+        let mut out = Vec::new();
+        for b in &self.spec.fluid_blocks {
+            let nx = (b.size.0 .0 / ds).round() as usize;
+            let ny = (b.size.1 .0 / ds).round() as usize;
+            let top = b.min.1 + b.size.1 .0;
+            for j in 0..ny {
+                for i in 0..nx {
+                    let x = DVec2::new(
+                        b.min.0 + (i as f64 + 0.5) * ds,
+                        b.min.1 + (j as f64 + 0.5) * ds,
+                    );
+                    let rho = eos.density(eos.rho0 * g * (top - x.y));
+                    out.push((x, rho, rho * ds * ds));
+                }
+            }
+        }
+        out
+    }
+
+    /// Height of the tallest fluid block [m].
+    pub fn fluid_height(&self) -> f64 {
+        self.spec
+            .fluid_blocks
+            .iter()
+            .map(|b| b.size.1 .0)
+            .fold(0.0, f64::max)
+    }
+
+    pub fn eos(&self) -> Tait {
+        Tait::new(
+            self.spec.fluid.density.0,
+            self.sound_speed,
+            self.spec.fluid.gamma.0,
+        )
+    }
+
+    /// The bounding box beyond which a particle has left the domain: the walls' box
+    /// widened by four kernel supports, and for an open tank twice its height upward.
+    pub fn domain(&self) -> (DVec2, DVec2) {
+        let mut lo = DVec2::splat(f64::INFINITY);
+        let mut hi = DVec2::splat(f64::NEG_INFINITY);
+        for w in self.walls() {
+            lo = lo.min(w.a).min(w.b);
+            hi = hi.max(w.a).max(w.b);
+        }
+        for b in &self.spec.fluid_blocks {
+            lo = lo.min(DVec2::from(b.min));
+            hi = hi.max(DVec2::from(b.min) + DVec2::new(b.size.0 .0, b.size.1 .0));
+        }
+        let margin = 4.0 * self.spec.kernel.support_factor() * self.h;
+        let open = self.spec.tank.as_ref().is_none_or(|t| t.open_top);
+        let extra_up = if open { hi.y - lo.y } else { 0.0 };
+        (
+            lo - DVec2::splat(margin),
+            hi + DVec2::new(margin, margin + extra_up),
+        )
+    }
+
+    /// Builds the simulation state: fluid particles, walls, sensors and gauges as
+    /// entities, the run's constants and clock.
+    pub fn build_sim(&self, out_dir: PathBuf) -> Sim {
+        let mut world = hecs::World::new();
+        let particles = self.initial_particles();
+        world.spawn_batch(particles.iter().enumerate().map(|(i, &(x, rho, m))| {
+            (
+                Fluid,
+                ParticleId(i as u32),
+                Position(x),
+                Velocity(DVec2::ZERO),
+                Density(rho),
+                Pressure(0.0),
+                Mass(m),
+            )
+        }));
+        let walls = self.walls();
+        for s in &self.spec.pressure_sensors {
+            let wall = walls.iter().position(|w| w.name == s.wall).unwrap_or(0);
+            let width = s.width.map_or(2.0 * self.h, |w| w.0);
+            world.spawn((PressureSensor {
+                name: s.name.clone(),
+                at: s.at.into(),
+                wall,
+                width,
+            },));
+        }
+        for g in &self.spec.wave_gauges {
+            world.spawn((WaveGauge {
+                name: g.name.clone(),
+                x: g.x,
+            },));
+        }
+        for w in walls {
+            world.spawn((w,));
+        }
+        Sim {
+            world,
+            clock: Clock {
+                end_time: self.spec.end_time.0,
+                ..Clock::default()
+            },
+            constants: Constants {
+                eos: self.eos(),
+                gravity: self.spec.fluid.gravity.into(),
+                spacing: self.spacing,
+                h: self.h,
+                kernel: self.spec.kernel,
+                fluid_height: self.fluid_height(),
+                domain: self.domain(),
+            },
+            resources: Resources::default(),
+            out_dir,
+            name: self.spec.name.clone(),
+            diagnostics: Default::default(),
+        }
+    }
+}
+
+/// Checks that need more than one field, and derives ds, h and c_0.
+fn validate(
+    spec: ScenarioSpec,
+    at: &dyn Fn(&str, String) -> LoadError,
+    source: PathBuf,
+) -> Result<Scenario, LoadError> {
+    let first = spec.fluid_blocks.first().ok_or_else(|| {
+        at(
+            "fluid_blocks",
+            "no fluid: give at least one block `(min: (x, y), size: (w, h))`".into(),
+        )
+    })?;
+    let spacing = match spec.resolution {
+        Resolution::Spacing(ds) => ds.0,
+        Resolution::ParticlesAcross(n) if n >= 2 => first.size.0 .0 / n as f64,
+        Resolution::ParticlesAcross(n) => {
+            return Err(at(
+                "resolution",
+                format!("ParticlesAcross({n}) is out of range; accepted: 2 or more"),
+            ))
+        }
+    };
+    let count: f64 = spec
+        .fluid_blocks
+        .iter()
+        .map(|b| (b.size.0 .0 / spacing).round() * (b.size.1 .0 / spacing).round())
+        .sum();
+    if count > MAX_PARTICLES {
+        return Err(at(
+            "resolution",
+            format!("{count:.0} fluid particles would not fit; accepted: at most {MAX_PARTICLES:.0} (use a coarser resolution)"),
+        ));
+    }
+    if count < 1.0 {
+        return Err(at(
+            "resolution",
+            format!("spacing {spacing} m leaves the fluid blocks empty; use a finer resolution"),
+        ));
+    }
+    let g = DVec2::from(spec.fluid.gravity).length();
+    let tallest = spec
+        .fluid_blocks
+        .iter()
+        .map(|b| b.size.1 .0)
+        .fold(0.0, f64::max);
+    let sound_speed = match spec.fluid.sound_speed {
+        Some(c) => c.0,
+        None if g > 0.0 => 10.0 * (2.0 * g * tallest).sqrt(),
+        None => {
+            return Err(at(
+                "sound_speed",
+                "cannot be derived without gravity; give `sound_speed: <m/s>`".into(),
+            ))
+        }
+    };
+    let scenario = Scenario {
+        h: spec.h_over_dx.0 * spacing,
+        spacing,
+        sound_speed,
+        spec,
+        source,
+    };
+    let walls = scenario.walls();
+    for (i, w) in walls.iter().enumerate() {
+        if w.length() == 0.0 {
+            return Err(at("walls", format!("wall `{}` has zero length", w.name)));
+        }
+        if walls[..i].iter().any(|o| o.name == w.name) {
+            return Err(at(
+                "walls",
+                format!("two walls are named `{}`; names must be unique", w.name),
+            ));
+        }
+    }
+    // Every particle must start on the fluid side of every wall it lies alongside.
+    for (x, _, _) in scenario.initial_particles() {
+        for w in &walls {
+            let s = w.abscissa(x);
+            if w.distance(x) < 0.0 && s >= 0.0 && s <= w.length() {
+                return Err(at(
+                    "fluid_blocks",
+                    format!(
+                        "particle at ({:.4}, {:.4}) m starts outside wall `{}`; blocks must lie inside the walls",
+                        x.x, x.y, w.name
+                    ),
+                ));
+            }
+        }
+        if let Some(t) = &scenario.spec.tank {
+            if x.x < 0.0 || x.x > t.width.0 || x.y < 0.0 || x.y > t.height.0 {
+                return Err(at(
+                    "fluid_blocks",
+                    format!(
+                        "particle at ({:.4}, {:.4}) m lies outside the tank (0..{} m by 0..{} m)",
+                        x.x, x.y, t.width.0, t.height.0
+                    ),
+                ));
+            }
+        }
+    }
+    let names: Vec<&str> = walls.iter().map(|w| w.name.as_str()).collect();
+    for s in &scenario.spec.pressure_sensors {
+        let Some(w) = walls.iter().find(|w| w.name == s.wall) else {
+            return Err(at(
+                "pressure_sensors",
+                format!(
+                    "sensor `{}` is on wall `{}`, which does not exist; walls are: {}",
+                    s.name,
+                    s.wall,
+                    names.join(", ")
+                ),
+            ));
+        };
+        let p = DVec2::from(s.at);
+        if w.distance(p).abs() > 1e-6 || w.abscissa(p) < 0.0 || w.abscissa(p) > w.length() {
+            return Err(at(
+                "pressure_sensors",
+                format!(
+                    "sensor `{}` at ({}, {}) is not on wall `{}`; put `at` on the wall",
+                    s.name, p.x, p.y, w.name
+                ),
+            ));
+        }
+    }
+    if scenario.spec.pipeline.is_empty() {
+        return Err(at(
+            "pipeline",
+            "the pipeline is empty; list the stages to run".into(),
+        ));
+    }
+    Ok(scenario)
+}
+
+/// Line and column (1-based) of the first `field:` in the text, or (0, 0).
+fn locate(text: &str, field: &str) -> (usize, usize) {
+    let pattern = format!("{field}:");
+    let mut offset = 0;
+    while let Some(found) = text[offset..].find(&pattern) {
+        let start = offset + found;
+        let before_ok = text[..start]
+            .chars()
+            .next_back()
+            .is_none_or(|c| !c.is_alphanumeric() && c != '_');
+        if before_ok {
+            let line = text[..start].matches('\n').count() + 1;
+            let column = start - text[..start].rfind('\n').map_or(0, |n| n + 1) + 1;
+            return (line, column);
+        }
+        offset = start + pattern.len();
+    }
+    (0, 0)
+}
+
+/// The name of the field whose value the position (1-based line, column) falls in:
+/// the last `name:` before it.
+fn field_before(text: &str, line: usize, column: usize) -> Option<String> {
+    let mut offset = 0;
+    for (i, l) in text.split_inclusive('\n').enumerate() {
+        if i + 1 == line {
+            offset += (column.saturating_sub(1)).min(l.len());
+            break;
+        }
+        offset += l.len();
+    }
+    let before = text.get(..offset.min(text.len()))?;
+    let bytes = before.as_bytes();
+    let mut i = bytes.len();
+    while i > 0 {
+        i -= 1;
+        if bytes[i] == b':'
+            && (i + 1 >= bytes.len() || bytes[i + 1] != b':')
+            && (i == 0 || bytes[i - 1] != b':')
+        {
+            let end = before[..i].trim_end().len();
+            let start = before[..end]
+                .rfind(|c: char| !(c.is_alphanumeric() || c == '_'))
+                .map_or(0, |s| s + 1);
+            let name = &before[start..end];
+            if !name.is_empty() && !name.starts_with(|c: char| c.is_ascii_digit()) {
+                return Some(name.to_string());
+            }
+        }
+    }
+    None
+}

@@ -1,0 +1,79 @@
+//! The stage trait: one step of the pipeline (neighbour grid, density, EOS, forces, ...).
+
+use crate::sim::Sim;
+use glam::DVec2;
+
+/// A pipeline stage. The runner calls [`Stage::setup`] once for every stage in
+/// pipeline order before the first step, then [`Stage::run`] for every stage in order
+/// each step (inside a `tracing` span named after the stage), then [`Stage::finish`].
+pub trait Stage: Send {
+    /// The registered name (snake_case), used in spans, the profile table and errors.
+    fn name(&self) -> &'static str;
+
+    /// Adds the components and resources this stage owns, and checks that what it needs
+    /// from earlier stages is there. Runs once, in pipeline order.
+    fn setup(&mut self, _sim: &mut Sim) -> Result<(), SetupError> {
+        Ok(())
+    }
+
+    /// Advances this stage's part of one time step.
+    fn run(&mut self, sim: &mut Sim) -> Result<(), StepError>;
+
+    /// After the last step (also after an unstable stop): flush files, draw plots.
+    fn finish(&mut self, _sim: &mut Sim) -> Result<(), StepError> {
+        Ok(())
+    }
+}
+
+/// A stage cannot start: the message says what is missing and how to fix the scenario.
+#[derive(Debug, thiserror::Error)]
+#[error("stage `{stage}`: {message}")]
+pub struct SetupError {
+    pub stage: &'static str,
+    pub message: String,
+}
+
+impl SetupError {
+    pub fn new(stage: &'static str, message: impl Into<String>) -> Self {
+        Self {
+            stage,
+            message: message.into(),
+        }
+    }
+}
+
+/// Why a step could not be completed.
+#[derive(Debug, thiserror::Error)]
+pub enum StepError {
+    /// The simulation went unstable: non-finite values, a particle leaving the domain,
+    /// density out of bounds, or the time step collapsing.
+    #[error("{what}{}", particle_text(.particle, .position))]
+    Unstable {
+        what: String,
+        particle: Option<u32>,
+        position: Option<DVec2>,
+    },
+    /// Writing an output failed.
+    #[error("output {path}: {message}")]
+    Output { path: String, message: String },
+    /// A bug or an inconsistent pipeline.
+    #[error("{0}")]
+    Internal(String),
+}
+
+fn particle_text(particle: &Option<u32>, position: &Option<DVec2>) -> String {
+    match (particle, position) {
+        (Some(i), Some(x)) => format!(" (particle {i} at x = {:.4} m, y = {:.4} m)", x.x, x.y),
+        (Some(i), None) => format!(" (particle {i})"),
+        _ => String::new(),
+    }
+}
+
+impl StepError {
+    pub fn output(path: &std::path::Path, err: impl std::fmt::Display) -> Self {
+        StepError::Output {
+            path: path.display().to_string(),
+            message: err.to_string(),
+        }
+    }
+}

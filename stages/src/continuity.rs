@@ -1,0 +1,80 @@
+//! Continuity equation d rho_i/dt = sum_j m_j v_ij . grad_i W_ij (physics.md,
+//! "Governing equations"), summed over fluid and ghost neighbours.
+
+use crate::neighbour_grid::Neighbours;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use sph_core::components::{DensityRate, Fluid, Mass, Position, Velocity};
+use sph_core::kernel::Kernel;
+use sph_core::sim::Sim;
+use sph_core::stage::{SetupError, Stage, StepError};
+use sph_core::world::{ensure_component, Particles};
+use sph_core::{with_kernel, StageRegistry};
+
+#[derive(Debug, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Params {}
+
+pub fn register(registry: &mut StageRegistry) {
+    registry.register(
+        "continuity",
+        "density rate from the continuity equation",
+        |_: Params| Ok(Continuity),
+    );
+}
+
+pub struct Continuity;
+
+impl Stage for Continuity {
+    fn name(&self) -> &'static str {
+        "continuity"
+    }
+
+    fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
+        require_neighbours(sim, "continuity")?;
+        ensure_component::<Fluid, DensityRate>(&mut sim.world);
+        Ok(())
+    }
+
+    fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
+        let Some(nb) = sim.resources.get::<Neighbours>() else {
+            return Ok(());
+        };
+        let Some(particles) = Particles::of(&sim.world) else {
+            return Ok(());
+        };
+        let (x, v, m) = (
+            particles.joined::<Position>()?,
+            particles.joined::<Velocity>()?,
+            particles.joined::<Mass>()?,
+        );
+        let (x, v, m) = (x.view(), v.view(), m.view());
+        let mut rate = particles.fluid_mut::<DensityRate>()?;
+        let c = &sim.constants;
+        with_kernel!(c.kernel, c.h, |k| {
+            rate.par_iter_mut().enumerate().for_each(|(i, out)| {
+                let (xi, vi) = (x.fluid[i].0, v.fluid[i].0);
+                let mut sum = 0.0;
+                for &j in nb.of(i) {
+                    let xij = xi - x.get(j).0;
+                    let r = xij.length();
+                    sum += m.get(j).0 * (vi - v.get(j).0).dot(k.grad(xij, r));
+                }
+                out.0 = sum;
+            })
+        });
+        Ok(())
+    }
+}
+
+/// Setup check shared by the stages that sum over neighbours.
+pub fn require_neighbours(sim: &Sim, stage: &'static str) -> Result<(), SetupError> {
+    if sim.resources.contains::<Neighbours>() {
+        Ok(())
+    } else {
+        Err(SetupError::new(
+            stage,
+            "needs neighbour lists: put NeighbourGrid() before it in the pipeline",
+        ))
+    }
+}

@@ -1,0 +1,288 @@
+//! Mirrored ghost-particle walls (physics.md, "Walls: mirrored ghost particles").
+//!
+//! Every fluid particle within one kernel support of a wall is mirrored across it; near
+//! a corner where two walls meet it is also mirrored across both (the double mirror).
+//! A ghost carries the mirrored position, the source's mass, a mirrored velocity (normal
+//! component reversed; tangential kept for free slip, reversed for no slip) and the
+//! source's density, optionally corrected hydrostatically so the ghost's pressure is
+//! p_i + rho_0 g . (x_ghost - x_i). Ghost entities are kept in their own archetype and
+//! reused from step to step: only the difference in count is spawned or despawned.
+
+use glam::DVec2;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure, Velocity, Wall};
+use sph_core::sim::{Sim, Tait};
+use sph_core::stage::{SetupError, Stage, StepError};
+use sph_core::world::{archetype, column, column_mut, count};
+use sph_core::StageRegistry;
+
+/// Tangential velocity condition at the walls.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Slip {
+    /// Tangential velocity mirrored unchanged (no wall shear).
+    FreeSlip,
+    /// Tangential velocity reversed (zero velocity at the wall).
+    NoSlip,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Params {
+    /// Default FreeSlip.
+    pub slip: Slip,
+    /// Correct ghost pressure (and density) by rho_0 g . (x_ghost - x_source).
+    /// Default true.
+    pub hydrostatic: bool,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Self {
+            slip: Slip::FreeSlip,
+            hydrostatic: true,
+        }
+    }
+}
+
+pub fn register(registry: &mut StageRegistry) {
+    registry.register(
+        "ghost_walls",
+        "mirror fluid particles across the walls as ghost particles",
+        |p: Params| {
+            Ok(GhostWalls {
+                params: p,
+                walls: Vec::new(),
+                corners: Vec::new(),
+            })
+        },
+    );
+}
+
+/// Ghost settings later stages need to refresh ghost densities.
+#[derive(Clone, Copy, Debug)]
+pub struct GhostSettings {
+    pub hydrostatic: bool,
+}
+
+pub struct GhostWalls {
+    params: Params,
+    walls: Vec<Wall>,
+    /// Pairs of walls sharing an end point: their corner gets double mirrors.
+    corners: Vec<(usize, usize)>,
+}
+
+/// One ghost to place: its source and the walls it is mirrored across.
+#[derive(Clone, Copy)]
+struct Image {
+    source: u32,
+    first: u16,
+    second: Option<u16>,
+}
+
+impl Stage for GhostWalls {
+    fn name(&self) -> &'static str {
+        "ghost_walls"
+    }
+
+    fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
+        self.walls = sim
+            .world
+            .query::<&Wall>()
+            .iter()
+            .map(|w| w.clone())
+            .collect();
+        if self.walls.is_empty() {
+            return Err(SetupError::new(
+                "ghost_walls",
+                "the scenario has no walls; remove GhostWalls() or add a `tank` or `walls`",
+            ));
+        }
+        let near = |a: DVec2, b: DVec2| (a - b).length() < 1e-9;
+        for i in 0..self.walls.len() {
+            for j in i + 1..self.walls.len() {
+                let (u, v) = (&self.walls[i], &self.walls[j]);
+                if near(u.a, v.a) || near(u.a, v.b) || near(u.b, v.a) || near(u.b, v.b) {
+                    self.corners.push((i, j));
+                }
+            }
+        }
+        sim.resources.insert(GhostSettings {
+            hydrostatic: self.params.hydrostatic,
+        });
+        Ok(())
+    }
+
+    fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
+        let images = self.images(sim)?;
+        resize_pool(&mut sim.world, images.len());
+        let Some(fluid) = archetype::<Fluid>(&sim.world) else {
+            return Ok(());
+        };
+        let Some(ghost) = archetype::<Ghost>(&sim.world) else {
+            return Ok(());
+        };
+        let (fx, fv) = (column::<Position>(fluid)?, column::<Velocity>(fluid)?);
+        let (fr, fm) = (column::<Density>(fluid)?, column::<Mass>(fluid)?);
+        let mut gs = column_mut::<Ghost>(ghost)?;
+        let (mut gx, mut gv) = (
+            column_mut::<Position>(ghost)?,
+            column_mut::<Velocity>(ghost)?,
+        );
+        let (mut gr, mut gm) = (column_mut::<Density>(ghost)?, column_mut::<Mass>(ghost)?);
+        let (fx, fv, fr, fm): (&[Position], &[Velocity], &[Density], &[Mass]) =
+            (&fx, &fv, &fr, &fm);
+        let correction = self
+            .params
+            .hydrostatic
+            .then_some((sim.constants.eos, sim.constants.gravity));
+        let walls = &self.walls;
+        let slip = self.params.slip;
+        (
+            &mut gs[..],
+            &mut gx[..],
+            &mut gv[..],
+            &mut gr[..],
+            &mut gm[..],
+            &images[..],
+        )
+            .into_par_iter()
+            .for_each(|(g, x, v, rho, m, img)| {
+                let s = img.source as usize;
+                let mut walls_crossed = [Some(&walls[img.first as usize]), None];
+                walls_crossed[1] = img.second.map(|k| &walls[k as usize]);
+                let (mut pos, mut vel) = (fx[s].0, fv[s].0);
+                for w in walls_crossed.into_iter().flatten() {
+                    pos = w.mirror(pos);
+                    vel = mirror_velocity(w, vel, slip);
+                }
+                *g = Ghost { source: img.source };
+                x.0 = pos;
+                v.0 = vel;
+                m.0 = fm[s].0;
+                rho.0 = ghost_density(fr[s].0, pos - fx[s].0, correction);
+            });
+        Ok(())
+    }
+}
+
+impl GhostWalls {
+    /// The ghosts this step needs, in a fixed order (by source, then wall).
+    fn images(&self, sim: &Sim) -> Result<Vec<Image>, StepError> {
+        let Some(fluid) = archetype::<Fluid>(&sim.world) else {
+            return Ok(Vec::new());
+        };
+        let pos = column::<Position>(fluid)?;
+        let support = sim.constants.support();
+        let walls = &self.walls;
+        let corners = &self.corners;
+        let near = |w: &Wall, x: DVec2| {
+            let (d, s) = (w.distance(x), w.abscissa(x));
+            (0.0..support).contains(&d) && s >= 0.0 && s <= w.length()
+        };
+        Ok(pos
+            .par_chunks(1024)
+            .enumerate()
+            .flat_map_iter(|(c, chunk)| {
+                let mut out = Vec::new();
+                for (k, x) in chunk.iter().enumerate() {
+                    let source = (c * 1024 + k) as u32;
+                    for (w, wall) in walls.iter().enumerate() {
+                        if near(wall, x.0) {
+                            out.push(Image {
+                                source,
+                                first: w as u16,
+                                second: None,
+                            });
+                        }
+                    }
+                    for &(a, b) in corners {
+                        if near(&walls[a], x.0) && near(&walls[b], x.0) {
+                            out.push(Image {
+                                source,
+                                first: a as u16,
+                                second: Some(b as u16),
+                            });
+                        }
+                    }
+                }
+                out
+            })
+            .collect())
+    }
+}
+
+/// Velocity of a ghost mirrored across a fixed wall.
+fn mirror_velocity(w: &Wall, v: DVec2, slip: Slip) -> DVec2 {
+    match slip {
+        Slip::FreeSlip => {
+            let n = w.normal();
+            v - 2.0 * v.dot(n) * n
+        }
+        Slip::NoSlip => -v,
+    }
+}
+
+/// Ghost density: the source's, or with the hydrostatic correction the density whose
+/// pressure is p_source + rho_0 g . (x_ghost - x_source).
+fn ghost_density(rho_source: f64, offset: DVec2, correction: Option<(Tait, DVec2)>) -> f64 {
+    match correction {
+        Some((eos, g)) => eos.density(eos.pressure(rho_source) + eos.rho0 * g.dot(offset)),
+        None => rho_source,
+    }
+}
+
+/// Brings the ghost pool to `needed` entities: spawns the shortfall or despawns the
+/// surplus from the end of the archetype (which keeps the others' order).
+fn resize_pool(world: &mut hecs::World, needed: usize) {
+    let have = count::<Ghost>(world);
+    if needed > have {
+        world.spawn_batch((have..needed).map(|_| {
+            (
+                Ghost::default(),
+                Position::default(),
+                Velocity::default(),
+                Density(1.0),
+                Pressure(0.0),
+                Mass(0.0),
+            )
+        }));
+    } else if needed < have {
+        let surplus: Vec<hecs::Entity> = world
+            .query::<hecs::Entity>()
+            .with::<&Ghost>()
+            .iter()
+            .skip(needed)
+            .collect();
+        for e in surplus.into_iter().rev() {
+            let _ = world.despawn(e);
+        }
+    }
+}
+
+/// Re-copies every ghost's density from its source (after a stage changed the fluid
+/// densities, e.g. re-initialisation), with the hydrostatic correction if enabled.
+pub fn refresh_ghost_density(sim: &Sim) -> Result<(), StepError> {
+    let (Some(fluid), Some(ghost)) = (
+        archetype::<Fluid>(&sim.world),
+        archetype::<Ghost>(&sim.world),
+    ) else {
+        return Ok(());
+    };
+    let hydrostatic = sim
+        .resources
+        .get::<GhostSettings>()
+        .is_some_and(|s| s.hydrostatic);
+    let correction = hydrostatic.then_some((sim.constants.eos, sim.constants.gravity));
+    let (fx, fr) = (column::<Position>(fluid)?, column::<Density>(fluid)?);
+    let (gs, gx) = (column::<Ghost>(ghost)?, column::<Position>(ghost)?);
+    let mut gr = column_mut::<Density>(ghost)?;
+    let (fx, fr): (&[Position], &[Density]) = (&fx, &fr);
+    (&mut gr[..], &gs[..], &gx[..])
+        .into_par_iter()
+        .for_each(|(rho, g, x)| {
+            let s = g.source as usize;
+            rho.0 = ghost_density(fr[s].0, x.0 - fx[s].0, correction);
+        });
+    Ok(())
+}

@@ -1,0 +1,44 @@
+//! The standard WCSPH stages (physics.md). One stage per file; each registers under its
+//! snake_case name with a typed parameter struct whose fields document their defaults.
+//!
+//! A usual step, in pipeline order:
+//! `GhostWalls` mirror the fluid across the walls, `NeighbourGrid` finds every
+//! particle's neighbours, `Reinitialise` (every N steps) Shepard-filters the density,
+//! `Eos` gives pressures, `Continuity` and `Forces` the rates, `Probe` samples sensors,
+//! `Integrate` advances the state, then `Energy`, `VtkFrames` and `Snapshots` report.
+
+pub mod continuity;
+pub mod energy;
+pub mod eos;
+pub mod forces;
+pub mod ghost_walls;
+pub mod integrate;
+pub mod neighbour_grid;
+pub mod probe;
+pub mod reinitialise;
+pub mod snapshots;
+pub mod vtk_frames;
+
+use sph_core::StageRegistry;
+
+/// Registers every standard stage.
+pub fn register_standard(registry: &mut StageRegistry) {
+    ghost_walls::register(registry);
+    neighbour_grid::register(registry);
+    reinitialise::register(registry);
+    eos::register(registry);
+    continuity::register(registry);
+    forces::register(registry);
+    probe::register(registry);
+    integrate::register(registry);
+    energy::register(registry);
+    vtk_frames::register(registry);
+    snapshots::register(registry);
+}
+
+/// A registry holding the standard stages.
+pub fn standard_registry() -> StageRegistry {
+    let mut registry = StageRegistry::new();
+    register_standard(&mut registry);
+    registry
+}

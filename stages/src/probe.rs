@@ -1,0 +1,421 @@
+//! Probes: wall pressure sensors by Methods I, II and III, wave gauges, surge front,
+//! column height, maximum density fluctuation and neighbour-count statistics, sampled
+//! into `probes.csv` (column `time`, then `<sensor>.<method>`, `<gauge>`, `front`, ...)
+//! and plotted at the end of the run.
+//!
+//! Pressure extraction (physics.md, "Wall-pressure extraction"):
+//! - Method I (`shepard`): Shepard interpolation of fluid and ghost pressures at the
+//!   sensor point.
+//! - Method II (`nearest`): the nearest fluid particle's pressure, corrected to the
+//!   sensor's depth: P = p_n + rho_0 g . (x_s - x_n), so a deeper point reads more.
+//! - Method III (`averaged`, Oger et al. 2005): fluid particles within 1.5 h of the wall
+//!   whose projection falls inside the sensor width S, projected onto the wall with the
+//!   same hydrostatic correction, sorted along the wall abscissa q and averaged with
+//!   weights dS_k = (q_{k+1} - q_{k-1})/2 (the sensor's edges close the ends).
+//!
+//! A sensor with no fluid within the kernel support reads 0 (dry).
+
+use crate::neighbour_grid::Neighbours;
+use glam::DVec2;
+use serde::{Deserialize, Serialize};
+use sph_core::components::{
+    Density, Fluid, Mass, NeighbourCount, Position, Pressure, PressureSensor, Wall, WaveGauge,
+};
+use sph_core::kernel;
+use sph_core::series::SeriesWriter;
+use sph_core::sim::Sim;
+use sph_core::stage::{SetupError, Stage, StepError};
+use sph_core::world::{archetype, column, Particles};
+use sph_core::StageRegistry;
+
+/// A wall-pressure extraction method.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Method {
+    /// Method I: Shepard interpolation at the sensor point.
+    Shepard,
+    /// Method II: nearest particle, hydrostatically corrected.
+    Nearest,
+    /// Method III: Oger's pseudo-sensor average over the sensor width.
+    Averaged,
+}
+
+impl Method {
+    fn suffix(self) -> &'static str {
+        match self {
+            Method::Shepard => "shepard",
+            Method::Nearest => "nearest",
+            Method::Averaged => "averaged",
+        }
+    }
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Params {
+    /// Sampling interval [s]; 0 samples every step. Default 0.005.
+    pub interval: f64,
+    /// Extraction methods for every pressure sensor. Default [Shepard, Nearest, Averaged].
+    pub methods: Vec<Method>,
+    /// Surge front: largest x of fluid touching the floor (y < ds), plus ds/2. Default false.
+    pub front: bool,
+    /// Column height: largest y of fluid at the left wall (x < ds), plus ds/2. Default false.
+    pub column_height: bool,
+    /// Maximum |rho/rho_0 - 1| over the fluid. Default false.
+    pub density_fluctuation: bool,
+    /// Minimum, mean and maximum neighbour count. Default false.
+    pub neighbours: bool,
+    /// Draw PNG plots of the series at the end of the run. Default true.
+    pub plots: bool,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Self {
+            interval: 0.005,
+            methods: vec![Method::Shepard, Method::Nearest, Method::Averaged],
+            front: false,
+            column_height: false,
+            density_fluctuation: false,
+            neighbours: false,
+            plots: true,
+        }
+    }
+}
+
+pub fn register(registry: &mut StageRegistry) {
+    registry.register(
+        "probe",
+        "pressure sensors, wave gauges, front, column height, statistics",
+        |p: Params| {
+            if !(p.interval >= 0.0 && p.interval.is_finite()) {
+                return Err(format!(
+                    "field `interval` = {} is out of range; accepted: seconds >= 0",
+                    p.interval
+                ));
+            }
+            Ok(Probe {
+                params: p,
+                sensors: Vec::new(),
+                gauges: Vec::new(),
+                walls: Vec::new(),
+                next: 0.0,
+                out: None,
+            })
+        },
+    );
+}
+
+pub struct Probe {
+    params: Params,
+    sensors: Vec<PressureSensor>,
+    gauges: Vec<WaveGauge>,
+    walls: Vec<Wall>,
+    next: f64,
+    out: Option<SeriesWriter>,
+}
+
+impl Stage for Probe {
+    fn name(&self) -> &'static str {
+        "probe"
+    }
+
+    fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
+        let err = |m: String| SetupError::new("probe", m);
+        self.sensors = sim
+            .world
+            .query::<&PressureSensor>()
+            .iter()
+            .map(|s| s.clone())
+            .collect();
+        self.gauges = sim
+            .world
+            .query::<&WaveGauge>()
+            .iter()
+            .map(|g| g.clone())
+            .collect();
+        self.walls = sim
+            .world
+            .query::<&Wall>()
+            .iter()
+            .map(|w| w.clone())
+            .collect();
+        let needs_grid = !self.sensors.is_empty() && self.params.methods.contains(&Method::Shepard);
+        if needs_grid && !sim.resources.contains::<Neighbours>() {
+            return Err(err(
+                "Method I (Shepard) needs the neighbour grid: put NeighbourGrid() before Probe()"
+                    .into(),
+            ));
+        }
+        if self.params.neighbours
+            && archetype::<Fluid>(&sim.world).is_some_and(|a| !a.has::<NeighbourCount>())
+        {
+            return Err(err(
+                "neighbour statistics need NeighbourGrid(count: true) before Probe()".into(),
+            ));
+        }
+        let columns = self.columns();
+        if columns.is_empty() {
+            return Err(err("nothing to probe: add pressure_sensors or wave_gauges to the scenario, or turn on front, column_height, density_fluctuation or neighbours".into()));
+        }
+        let path = sim.out_dir.join("probes.csv");
+        self.out = Some(SeriesWriter::create(&path, columns).map_err(|e| err(e.to_string()))?);
+        Ok(())
+    }
+
+    fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
+        if sim.clock.time + 1e-12 < self.next {
+            return Ok(());
+        }
+        self.next = sim.clock.time + self.params.interval;
+        let row = self.sample(sim)?;
+        if let Some(out) = &mut self.out {
+            out.push(sim.clock.time, row)?;
+        }
+        Ok(())
+    }
+
+    fn finish(&mut self, sim: &mut Sim) -> Result<(), StepError> {
+        let Some(out) = &mut self.out else {
+            return Ok(());
+        };
+        out.flush()?;
+        if !self.params.plots {
+            return Ok(());
+        }
+        let dir = &sim.out_dir;
+        let title = |what: &str| format!("{}: {what}", sim.name);
+        for s in &self.sensors {
+            let names: Vec<String> = self
+                .params
+                .methods
+                .iter()
+                .map(|m| format!("{}.{}", s.name, m.suffix()))
+                .collect();
+            let refs: Vec<&str> = names.iter().map(String::as_str).collect();
+            out.plot(
+                &dir.join(format!("probe_{}.png", s.name)),
+                &title(&format!("pressure at {}", s.name)),
+                "pressure [Pa]",
+                &refs,
+            )?;
+        }
+        let gauges: Vec<&str> = self.gauges.iter().map(|g| g.name.as_str()).collect();
+        if !gauges.is_empty() {
+            out.plot(
+                &dir.join("probe_gauges.png"),
+                &title("wave gauges"),
+                "free-surface elevation [m]",
+                &gauges,
+            )?;
+        }
+        let mut lengths = Vec::new();
+        if self.params.front {
+            lengths.push("front");
+        }
+        if self.params.column_height {
+            lengths.push("column_height");
+        }
+        if !lengths.is_empty() {
+            out.plot(
+                &dir.join("probe_front.png"),
+                &title("surge front and column height"),
+                "length [m]",
+                &lengths,
+            )?;
+        }
+        if self.params.density_fluctuation {
+            let name = "max_density_fluctuation";
+            out.plot(
+                &dir.join("probe_density.png"),
+                &title(name),
+                "max |rho/rho_0 - 1|",
+                &[name],
+            )?;
+        }
+        if self.params.neighbours {
+            let names = ["neighbours_min", "neighbours_mean", "neighbours_max"];
+            out.plot(
+                &dir.join("probe_neighbours.png"),
+                &title("neighbour count"),
+                "neighbours",
+                &names,
+            )?;
+        }
+        Ok(())
+    }
+}
+
+impl Probe {
+    fn columns(&self) -> Vec<String> {
+        let mut c = Vec::new();
+        for s in &self.sensors {
+            c.extend(
+                self.params
+                    .methods
+                    .iter()
+                    .map(|m| format!("{}.{}", s.name, m.suffix())),
+            );
+        }
+        c.extend(self.gauges.iter().map(|g| g.name.clone()));
+        let flags = [
+            (self.params.front, &["front"][..]),
+            (self.params.column_height, &["column_height"][..]),
+            (
+                self.params.density_fluctuation,
+                &["max_density_fluctuation"][..],
+            ),
+            (
+                self.params.neighbours,
+                &["neighbours_min", "neighbours_mean", "neighbours_max"][..],
+            ),
+        ];
+        for (on, names) in flags {
+            if on {
+                c.extend(names.iter().map(|n| n.to_string()));
+            }
+        }
+        c
+    }
+
+    fn sample(&self, sim: &Sim) -> Result<Vec<f64>, StepError> {
+        let Some(particles) = Particles::of(&sim.world) else {
+            return Ok(vec![0.0; self.columns().len()]);
+        };
+        let x = particles.fluid::<Position>()?;
+        let p = particles.fluid::<Pressure>()?;
+        let ds = sim.constants.spacing;
+        let mut row = Vec::new();
+        for s in &self.sensors {
+            for m in &self.params.methods {
+                row.push(match m {
+                    Method::Shepard => self.shepard(sim, particles, s.at)?,
+                    Method::Nearest => nearest(sim, &x, &p, s.at),
+                    Method::Averaged => averaged(sim, &x, &p, &self.walls[s.wall], s),
+                });
+            }
+        }
+        for g in &self.gauges {
+            let top = x
+                .iter()
+                .filter(|q| (q.0.x - g.x).abs() < ds)
+                .map(|q| q.0.y)
+                .fold(f64::NEG_INFINITY, f64::max);
+            row.push(if top.is_finite() { top + 0.5 * ds } else { 0.0 });
+        }
+        if self.params.front {
+            let front = x
+                .iter()
+                .filter(|q| q.0.y < ds)
+                .map(|q| q.0.x)
+                .fold(0.0, f64::max);
+            row.push(front + 0.5 * ds);
+        }
+        if self.params.column_height {
+            let height = x
+                .iter()
+                .filter(|q| q.0.x < ds)
+                .map(|q| q.0.y)
+                .fold(0.0, f64::max);
+            row.push(height + 0.5 * ds);
+        }
+        if self.params.density_fluctuation {
+            let rho = particles.fluid::<Density>()?;
+            let rho0 = sim.constants.eos.rho0;
+            row.push(
+                rho.iter()
+                    .map(|r| (r.0 / rho0 - 1.0).abs())
+                    .fold(0.0, f64::max),
+            );
+        }
+        if self.params.neighbours {
+            let n = column::<NeighbourCount>(particles.fluid)?;
+            let min = n.iter().map(|c| c.0).min().unwrap_or(0) as f64;
+            let max = n.iter().map(|c| c.0).max().unwrap_or(0) as f64;
+            let mean = n.iter().map(|c| c.0 as f64).sum::<f64>() / n.len().max(1) as f64;
+            row.extend([min, mean, max]);
+        }
+        Ok(row)
+    }
+
+    /// Method I: Shepard interpolation of fluid and ghost pressures at `at`.
+    fn shepard(&self, sim: &Sim, particles: Particles, at: DVec2) -> Result<f64, StepError> {
+        let Some(nb) = sim.resources.get::<Neighbours>() else {
+            return Ok(0.0);
+        };
+        let (x, p) = (
+            particles.joined::<Position>()?,
+            particles.joined::<Pressure>()?,
+        );
+        let (rho, m) = (particles.joined::<Density>()?, particles.joined::<Mass>()?);
+        let (x, p, rho, m) = (x.view(), p.view(), rho.view(), m.view());
+        let c = &sim.constants;
+        let (mut num, mut den) = (0.0, 0.0);
+        nb.grid.for_each_near(at, |j| {
+            let w = kernel::w(c.kernel, c.h, (at - x.get(j).0).length());
+            let vol = m.get(j).0 / rho.get(j).0;
+            num += p.get(j).0 * w * vol;
+            den += w * vol;
+        });
+        Ok(if den > 0.0 { num / den } else { 0.0 })
+    }
+}
+
+/// Pressure of a fluid particle carried hydrostatically to point `to`.
+fn carried(sim: &Sim, p: f64, from: DVec2, to: DVec2) -> f64 {
+    p + sim.constants.eos.rho0 * sim.constants.gravity.dot(to - from)
+}
+
+/// Method II: the nearest fluid particle within the kernel support.
+fn nearest(sim: &Sim, x: &[Position], p: &[Pressure], at: DVec2) -> f64 {
+    let support2 = sim.constants.support().powi(2);
+    let best = x
+        .iter()
+        .enumerate()
+        .map(|(i, q)| (i, (q.0 - at).length_squared()))
+        .filter(|&(_, d2)| d2 < support2)
+        .min_by(|a, b| a.1.total_cmp(&b.1));
+    best.map_or(0.0, |(i, _)| carried(sim, p[i].0, x[i].0, at))
+}
+
+/// Method III: Oger's pseudo-sensor.
+fn averaged(sim: &Sim, x: &[Position], p: &[Pressure], wall: &Wall, s: &PressureSensor) -> f64 {
+    let reach = 1.5 * sim.constants.h;
+    let centre = wall.abscissa(s.at);
+    let (lo, hi) = (centre - 0.5 * s.width, centre + 0.5 * s.width);
+    let mut samples: Vec<(f64, f64)> = x
+        .iter()
+        .zip(p)
+        .filter_map(|(q, pq)| {
+            let (d, a) = (wall.distance(q.0), wall.abscissa(q.0));
+            ((0.0..reach).contains(&d) && (lo..=hi).contains(&a)).then(|| {
+                let on_wall = q.0 - d * wall.normal();
+                (a, carried(sim, pq.0, q.0, on_wall))
+            })
+        })
+        .collect();
+    if samples.is_empty() {
+        return 0.0;
+    }
+    samples.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    let q = |k: isize| -> f64 {
+        if k < 0 {
+            lo
+        } else if k as usize >= samples.len() {
+            hi
+        } else {
+            samples[k as usize].0
+        }
+    };
+    let (mut num, mut den) = (0.0, 0.0);
+    for (k, &(_, pk)) in samples.iter().enumerate() {
+        let k = k as isize;
+        let ds = 0.5 * (q(k + 1) - q(k - 1));
+        num += pk * ds;
+        den += ds;
+    }
+    if den > 0.0 {
+        num / den
+    } else {
+        samples.iter().map(|s| s.1).sum::<f64>() / samples.len() as f64
+    }
+}

@@ -1,0 +1,97 @@
+//! Density re-initialisation by the Shepard filter (Colagrossi & Landrini 2003;
+//! physics.md, "Density re-initialisation"):
+//!   rho_i = sum_j m_j W_ij / sum_j (m_j/rho_j) W_ij   (j over fluid, ghosts and i itself)
+//! Run it every N steps with the stage's `every: N`; leave the stage out for "never".
+
+use crate::continuity::require_neighbours;
+use crate::ghost_walls::refresh_ghost_density;
+use crate::integrate::HalfDensity;
+use crate::neighbour_grid::Neighbours;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use sph_core::components::{Density, Mass, Position};
+use sph_core::kernel::Kernel;
+use sph_core::sim::Sim;
+use sph_core::stage::{SetupError, Stage, StepError};
+use sph_core::world::Particles;
+use sph_core::{with_kernel, StageRegistry};
+
+/// How often is the runner's `every: N` (default 1); the studied values are 1, 5, 20.
+#[derive(Debug, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Params {}
+
+pub fn register(registry: &mut StageRegistry) {
+    registry.register(
+        "reinitialise",
+        "Shepard density re-initialisation (use every: N)",
+        |_: Params| {
+            Ok(Reinitialise {
+                filtered: Vec::new(),
+            })
+        },
+    );
+}
+
+pub struct Reinitialise {
+    filtered: Vec<f64>,
+}
+
+impl Stage for Reinitialise {
+    fn name(&self) -> &'static str {
+        "reinitialise"
+    }
+
+    fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
+        require_neighbours(sim, "reinitialise")
+    }
+
+    fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
+        let Some(nb) = sim.resources.get::<Neighbours>() else {
+            return Ok(());
+        };
+        let Some(particles) = Particles::of(&sim.world) else {
+            return Ok(());
+        };
+        {
+            let (x, rho, m) = (
+                particles.joined::<Position>()?,
+                particles.joined::<Density>()?,
+                particles.joined::<Mass>()?,
+            );
+            let (x, rho, m) = (x.view(), rho.view(), m.view());
+            let c = &sim.constants;
+            self.filtered.resize(x.fluid.len(), 0.0);
+            with_kernel!(c.kernel, c.h, |k| {
+                let w0 = k.w(0.0);
+                self.filtered
+                    .par_iter_mut()
+                    .enumerate()
+                    .for_each(|(i, out)| {
+                        let xi = x.fluid[i].0;
+                        let (mi, rhoi) = (m.fluid[i].0, rho.fluid[i].0);
+                        let (mut num, mut den) = (mi * w0, mi / rhoi * w0);
+                        for &j in nb.of(i) {
+                            let w = k.w((xi - x.get(j).0).length());
+                            let mj = m.get(j).0;
+                            num += mj * w;
+                            den += mj / rho.get(j).0 * w;
+                        }
+                        *out = num / den;
+                    });
+            });
+        }
+        // Shift the leapfrog's half-step density by the same correction.
+        let mut rho = particles.fluid_mut::<Density>()?;
+        let mut half = particles.fluid.get::<&mut HalfDensity>();
+        for (i, r) in rho.iter_mut().enumerate() {
+            let delta = self.filtered[i] - r.0;
+            r.0 = self.filtered[i];
+            if let Some(h) = half.as_deref_mut() {
+                h[i].0 += delta;
+            }
+        }
+        drop((rho, half));
+        refresh_ghost_density(sim)
+    }
+}

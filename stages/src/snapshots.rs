@@ -1,0 +1,127 @@
+//! PNG pictures of the particles coloured by pressure at listed times
+//! (`snapshot_t1.400.png`), e.g. the paper's t = 1.4, 1.5, 1.7 s for the dam break.
+
+use glam::DVec2;
+use serde::{Deserialize, Serialize};
+use sph_core::components::{Position, Pressure, Wall};
+use sph_core::output::png::{write_snapshot, Snapshot};
+use sph_core::sim::Sim;
+use sph_core::stage::{Stage, StepError};
+use sph_core::world::Particles;
+use sph_core::StageRegistry;
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Params {
+    /// Simulated times [s] to draw; each is drawn at the first step at or after it.
+    pub times: Vec<f64>,
+    /// Colour scale [Pa]; default (0, rho_0 |g| H) with H the tallest initial fluid block.
+    pub pressure_range: Option<(f64, f64)>,
+    /// Image width [px]. Default 1200.
+    pub width: u32,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Self {
+            times: Vec::new(),
+            pressure_range: None,
+            width: 1200,
+        }
+    }
+}
+
+pub fn register(registry: &mut StageRegistry) {
+    registry.register(
+        "snapshots",
+        "PNG pictures of the particles coloured by pressure",
+        |mut p: Params| {
+            if p.times.iter().any(|t| !t.is_finite() || *t < 0.0) {
+                return Err("field `times`: accepted: times in seconds >= 0".into());
+            }
+            if !(100..=8000).contains(&p.width) {
+                return Err(format!(
+                    "field `width` = {} is out of range; accepted: 100 to 8000 pixels",
+                    p.width
+                ));
+            }
+            p.times.sort_by(f64::total_cmp);
+            Ok(Snapshots {
+                params: p,
+                taken: 0,
+            })
+        },
+    );
+}
+
+pub struct Snapshots {
+    params: Params,
+    taken: usize,
+}
+
+impl Stage for Snapshots {
+    fn name(&self) -> &'static str {
+        "snapshots"
+    }
+
+    fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
+        let Some(&t) = self.params.times.get(self.taken) else {
+            return Ok(());
+        };
+        if sim.clock.time + 1e-12 < t {
+            return Ok(());
+        }
+        while self
+            .params
+            .times
+            .get(self.taken)
+            .is_some_and(|&u| u <= sim.clock.time + 1e-12)
+        {
+            self.taken += 1;
+        }
+        let Some(particles) = Particles::of(&sim.world) else {
+            return Ok(());
+        };
+        let (x, p) = (
+            particles.fluid::<Position>()?,
+            particles.fluid::<Pressure>()?,
+        );
+        let positions: Vec<DVec2> = x.iter().map(|q| q.0).collect();
+        let values: Vec<f64> = p.iter().map(|q| q.0).collect();
+        let walls: Vec<(DVec2, DVec2)> = sim
+            .world
+            .query::<&Wall>()
+            .iter()
+            .map(|w| (w.a, w.b))
+            .collect();
+        let (mut lo, mut hi) = (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY));
+        for &(a, b) in &walls {
+            lo = lo.min(a).min(b);
+            hi = hi.max(a).max(b);
+        }
+        for q in &positions {
+            lo = lo.min(*q);
+            hi = hi.max(*q);
+        }
+        let c = &sim.constants;
+        let range = self
+            .params
+            .pressure_range
+            .unwrap_or((0.0, c.eos.rho0 * c.gravity.length() * c.fluid_height));
+        let path = sim
+            .out_dir
+            .join(format!("snapshot_t{:.3}.png", sim.clock.time));
+        let title = format!("{}  t = {:.3} s", sim.name, sim.clock.time);
+        let snapshot = Snapshot {
+            positions: &positions,
+            values: &values,
+            value_range: range,
+            bounds: (lo, hi),
+            walls: &walls,
+            title: &title,
+            colorbar_label: "pressure [Pa]",
+            width_px: self.params.width,
+        };
+        write_snapshot(&path, &snapshot).map_err(|e| StepError::output(&path, e))
+    }
+}

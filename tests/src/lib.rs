@@ -1,0 +1,1 @@
+//! Test support and an example plugin stage (see `plugin`).
