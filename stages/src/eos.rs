@@ -9,20 +9,30 @@ use sph_core::stage::{Stage, StepError};
 use sph_core::world::{archetype, column, column_mut};
 use sph_core::StageRegistry;
 
-/// The EOS has no parameters of its own: rho_0, c_0 and gamma are the scenario's `fluid`.
+/// rho_0, c_0 and gamma are the scenario's `fluid`.
 #[derive(Debug, Default, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Params {}
+#[serde(default, deny_unknown_fields)]
+pub struct Params {
+    /// Pressure floor [Pa]: lower pressures are raised to it (e.g. 0 suppresses tension
+    /// in thin free-surface jets). Default None: the Tait EOS as it is.
+    pub min_pressure: Option<f64>,
+}
 
 pub fn register(registry: &mut StageRegistry) {
     registry.register(
         "eos",
         "Tait equation of state: pressure from density",
-        |_: Params| Ok(Eos),
+        |p: Params| {
+            Ok(Eos {
+                floor: p.min_pressure.unwrap_or(f64::NEG_INFINITY),
+            })
+        },
     );
 }
 
-pub struct Eos;
+pub struct Eos {
+    floor: f64,
+}
 
 impl Stage for Eos {
     fn name(&self) -> &'static str {
@@ -31,26 +41,26 @@ impl Stage for Eos {
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
         let eos = sim.constants.eos;
-        if let Some(a) = archetype::<Fluid>(&sim.world) {
+        for arch in [
+            archetype::<Fluid>(&sim.world),
+            archetype::<Ghost>(&sim.world),
+        ]
+        .into_iter()
+        .flatten()
+        {
             apply(
                 &eos,
-                &column::<Density>(a)?,
-                &mut column_mut::<Pressure>(a)?,
-            );
-        }
-        if let Some(a) = archetype::<Ghost>(&sim.world) {
-            apply(
-                &eos,
-                &column::<Density>(a)?,
-                &mut column_mut::<Pressure>(a)?,
+                self.floor,
+                &column::<Density>(arch)?,
+                &mut column_mut::<Pressure>(arch)?,
             );
         }
         Ok(())
     }
 }
 
-fn apply(eos: &Tait, rho: &[Density], p: &mut [Pressure]) {
+fn apply(eos: &Tait, floor: f64, rho: &[Density], p: &mut [Pressure]) {
     p.par_iter_mut()
         .zip(rho.par_iter())
-        .for_each(|(p, rho)| p.0 = eos.pressure(rho.0));
+        .for_each(|(p, rho)| p.0 = eos.pressure(rho.0).max(floor));
 }

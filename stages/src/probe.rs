@@ -19,7 +19,8 @@ use crate::neighbour_grid::Neighbours;
 use glam::DVec2;
 use serde::{Deserialize, Serialize};
 use sph_core::components::{
-    Density, Fluid, Mass, NeighbourCount, Position, Pressure, PressureSensor, Wall, WaveGauge,
+    Density, Fluid, Mass, NeighbourCount, Position, Pressure, PressureSensor, Velocity, Wall,
+    WaveGauge,
 };
 use sph_core::kernel;
 use sph_core::series::SeriesWriter;
@@ -62,6 +63,8 @@ pub struct Params {
     pub column_height: bool,
     /// Maximum |rho/rho_0 - 1| over the fluid. Default false.
     pub density_fluctuation: bool,
+    /// Maximum fluid speed [m/s]. Default false.
+    pub max_speed: bool,
     /// Minimum, mean and maximum neighbour count. Default false.
     pub neighbours: bool,
     /// Draw PNG plots of the series at the end of the run. Default true.
@@ -76,6 +79,7 @@ impl Default for Params {
             front: false,
             column_height: false,
             density_fluctuation: false,
+            max_speed: false,
             neighbours: false,
             plots: true,
         }
@@ -232,6 +236,14 @@ impl Stage for Probe {
                 &[name],
             )?;
         }
+        if self.params.max_speed {
+            out.plot(
+                &dir.join("probe_speed.png"),
+                &title("maximum speed"),
+                "speed [m/s]",
+                &["max_speed"],
+            )?;
+        }
         if self.params.neighbours {
             let names = ["neighbours_min", "neighbours_mean", "neighbours_max"];
             out.plot(
@@ -264,6 +276,7 @@ impl Probe {
                 self.params.density_fluctuation,
                 &["max_density_fluctuation"][..],
             ),
+            (self.params.max_speed, &["max_speed"][..]),
             (
                 self.params.neighbours,
                 &["neighbours_min", "neighbours_mean", "neighbours_max"][..],
@@ -326,6 +339,10 @@ impl Probe {
                     .map(|r| (r.0 / rho0 - 1.0).abs())
                     .fold(0.0, f64::max),
             );
+        }
+        if self.params.max_speed {
+            let v = particles.fluid::<Velocity>()?;
+            row.push(v.iter().map(|v| v.0.length()).fold(0.0, f64::max));
         }
         if self.params.neighbours {
             let n = column::<NeighbourCount>(particles.fluid)?;

@@ -1,1 +1,3 @@
 //! Test support and an example plugin stage (see `plugin`).
+
+pub mod plugin;

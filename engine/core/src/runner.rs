@@ -105,6 +105,14 @@ pub enum RunError {
 /// offending frame (`unstable.vtp`) and the summary with the reason, finishes every
 /// stage (flushing its files), and returns the error.
 pub fn run(scenario: Scenario, opts: &RunOptions) -> Result<Summary, RunError> {
+    run_keeping_state(scenario, opts).map(|(summary, _)| summary)
+}
+
+/// As [`run`], also returning the final state (for tests and studies).
+pub fn run_keeping_state(
+    scenario: Scenario,
+    opts: &RunOptions,
+) -> Result<(Summary, Sim), RunError> {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(opts.threads.unwrap_or(0))
         .build()
@@ -128,7 +136,7 @@ pub fn run(scenario: Scenario, opts: &RunOptions) -> Result<Summary, RunError> {
     }
 }
 
-fn run_in_pool(mut scenario: Scenario, opts: &RunOptions) -> Result<Summary, RunError> {
+fn run_in_pool(mut scenario: Scenario, opts: &RunOptions) -> Result<(Summary, Sim), RunError> {
     let out = &opts.out_dir;
     let io_err = |e: std::io::Error| RunError::Output {
         path: out.display().to_string(),
@@ -235,7 +243,7 @@ fn run_in_pool(mut scenario: Scenario, opts: &RunOptions) -> Result<Summary, Run
             error,
             summary: Box::new(summary),
         }),
-        None => Ok(summary),
+        None => Ok((summary, sim)),
     }
 }
 

@@ -507,8 +507,10 @@ impl Scenario {
         let g = DVec2::from(self.spec.fluid.gravity).length();
         let mut out = Vec::new();
         for b in &self.spec.fluid_blocks {
-            let nx = (b.size.0 .0 / ds).round() as usize;
-            let ny = (b.size.1 .0 / ds).round() as usize;
+            // Whole lattice cells only: a rounded-up count would put the last row or
+            // column closer than ds/2 to a wall.
+            let nx = (b.size.0 .0 / ds + 1e-9).floor() as usize;
+            let ny = (b.size.1 .0 / ds + 1e-9).floor() as usize;
             let top = b.min.1 + b.size.1 .0;
             for j in 0..ny {
                 for i in 0..nx {
@@ -647,7 +649,7 @@ fn validate(
     let count: f64 = spec
         .fluid_blocks
         .iter()
-        .map(|b| (b.size.0 .0 / spacing).round() * (b.size.1 .0 / spacing).round())
+        .map(|b| (b.size.0 .0 / spacing + 1e-9).floor() * (b.size.1 .0 / spacing + 1e-9).floor())
         .sum();
     if count > MAX_PARTICLES {
         return Err(at(

@@ -1,0 +1,104 @@
+//! The example plugin stage (`sph_tests::plugin::MaxSpeed`) runs in a scenario next to
+//! the standard stages, and a registry without it refuses the scenario.
+
+use sph_core::runner::{run, RunOptions};
+use sph_core::Scenario;
+use std::path::{Path, PathBuf};
+
+const FILE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/scenarios/plugin.ron");
+
+/// A fresh, empty output folder under the system temp folder.
+fn temp_out(tag: &str) -> PathBuf {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos());
+    let dir = std::env::temp_dir().join(format!("sph-tests-{tag}-{}-{nanos}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+#[test]
+fn plugin_stage_runs_and_writes_its_series() {
+    let mut registry = sph_stages::standard_registry();
+    sph_tests::plugin::register(&mut registry);
+    let scenario =
+        Scenario::load(Path::new(FILE), &[], &registry).unwrap_or_else(|e| panic!("{e}"));
+    // Speed bound. Free fall (g t = 0.49 m/s at 0.05 s) is no bound here: the pressure
+    // gradient at the toe of a released column accelerates it faster than g. Ritter's
+    // shallow-water front speed 2 sqrt(g H) is: 0.99 m/s for this 0.025 m column.
+    let (gx, gy) = scenario.spec.fluid.gravity;
+    let ritter = 2.0 * ((gx * gx + gy * gy).sqrt() * scenario.fluid_height()).sqrt();
+    let bound = ritter.min(1.0);
+    let out = temp_out("plugin");
+    let opts = RunOptions {
+        out_dir: out.clone(),
+        threads: Some(2),
+        progress: false,
+        trace: None,
+    };
+    let summary = run(scenario, &opts).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(summary.status, "completed");
+    assert!(
+        (150..=250).contains(&summary.fluid_particles),
+        "{} particles",
+        summary.fluid_particles
+    );
+
+    let in_range = |v: f64| v.is_finite() && v > 0.0 && v < bound;
+    for key in ["max_speed", "max_speed_peak"] {
+        let v = summary.diagnostics.get(key).copied();
+        assert!(v.is_some_and(in_range), "diagnostic {key} = {v:?}");
+    }
+    let resolved =
+        std::fs::read_to_string(out.join("scenario.resolved.ron")).expect("resolved scenario");
+    assert!(resolved.contains("MaxSpeed("), "{resolved}");
+    let json = std::fs::read_to_string(out.join("summary.json")).expect("summary.json");
+    assert!(json.contains("\"max_speed\""), "{json}");
+
+    let csv = std::fs::read_to_string(out.join(sph_tests::plugin::CSV)).expect("max_speed.csv");
+    println!("{csv}diagnostics: {:?}", summary.diagnostics);
+    let mut lines = csv.lines();
+    assert_eq!(lines.next(), Some("time,max_speed"));
+    let rows: Vec<(f64, f64)> = lines
+        .map(|l| {
+            let (t, v) = l.split_once(',').unwrap_or_else(|| panic!("row `{l}`"));
+            (
+                t.parse().unwrap_or_else(|e| panic!("time `{t}`: {e}")),
+                v.parse().unwrap_or_else(|e| panic!("speed `{v}`: {e}")),
+            )
+        })
+        .collect();
+    // interval 0.01 over 0.05 s: about six rows (t = 0, 0.01, ..., 0.05).
+    assert!((4..=8).contains(&rows.len()), "{} rows:\n{csv}", rows.len());
+    assert!(
+        rows.windows(2).all(|w| w[1].0 > w[0].0),
+        "times increase:\n{csv}"
+    );
+    assert!(
+        rows.iter()
+            .all(|&(_, v)| v.is_finite() && (0.0..bound).contains(&v)),
+        "speeds in range:\n{csv}"
+    );
+    assert!(
+        rows.last().is_some_and(|&(_, v)| v > 0.0),
+        "the column moves:\n{csv}"
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn standard_registry_refuses_the_plugin_stage() {
+    let registry = sph_stages::standard_registry();
+    let err = Scenario::load(Path::new(FILE), &[], &registry).expect_err("MaxSpeed is unknown");
+    let shown = err.to_string();
+    assert!(shown.contains("unknown stage `MaxSpeed`"), "{shown}");
+    assert!(shown.contains("known stages:"), "{shown}");
+    assert!(shown.starts_with(FILE), "{shown}");
+    let text = std::fs::read_to_string(FILE).expect("plugin.ron");
+    let line = text
+        .lines()
+        .position(|l| l.contains("MaxSpeed("))
+        .expect("MaxSpeed line")
+        + 1;
+    assert_eq!(err.line, line, "{shown}");
+}

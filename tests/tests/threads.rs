@@ -1,0 +1,81 @@
+//! A run's results do not depend on the number of worker threads: a small dam break on
+//! one thread and on two writes byte-identical probes.csv and energy.csv.
+
+use sph_core::overrides::Override;
+use sph_core::runner::{run, RunOptions};
+use sph_core::Scenario;
+use std::path::PathBuf;
+
+const DAM: &str = include_str!("../../scenarios/dam_break.ron");
+
+/// A fresh output folder under the system temp folder.
+fn temp_out(tag: &str) -> PathBuf {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos());
+    let dir = std::env::temp_dir().join(format!("sph-tests-{tag}-{}-{nanos}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+/// Runs the small dam break on `threads` threads; returns the output folder.
+fn run_on(threads: usize) -> PathBuf {
+    let overrides: Vec<Override> = [
+        "resolution=ParticlesAcross(40)",
+        "end_time=0.3",
+        // Keep output cheap: one frame, no pictures or plots.
+        "pipeline.vtk_frames.interval=1.0",
+        "pipeline.snapshots.times=[]",
+        "pipeline.probe.plots=false",
+        "pipeline.energy.plots=false",
+    ]
+    .iter()
+    .map(|o| o.parse().unwrap_or_else(|e| panic!("{e}")))
+    .collect();
+    let registry = sph_stages::standard_registry();
+    let scenario = Scenario::from_str(DAM, "scenarios/dam_break.ron", &overrides, &registry)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let out = temp_out(&format!("threads{threads}"));
+    let opts = RunOptions {
+        out_dir: out.clone(),
+        threads: Some(threads),
+        progress: false,
+        trace: None,
+    };
+    let summary = run(scenario, &opts).unwrap_or_else(|e| panic!("{threads} threads: {e}"));
+    assert_eq!(summary.status, "completed");
+    assert_eq!(summary.threads, threads);
+    assert!(summary.steps > 100, "{} steps", summary.steps);
+    out
+}
+
+#[test]
+fn results_do_not_depend_on_thread_count() {
+    let one = run_on(1);
+    let two = run_on(2);
+    for file in ["probes.csv", "energy.csv"] {
+        let read = |dir: &PathBuf| {
+            std::fs::read_to_string(dir.join(file))
+                .unwrap_or_else(|e| panic!("{}: {e}", dir.join(file).display()))
+        };
+        let (a, b) = (read(&one), read(&two));
+        assert!(a.lines().count() > 10, "{file} has rows:\n{a}");
+        if a != b {
+            let (n, (la, lb)) = a
+                .lines()
+                .zip(b.lines())
+                .enumerate()
+                .find(|(_, (la, lb))| la != lb)
+                .unwrap_or((0, ("(length differs)", "")));
+            panic!(
+                "{file} differs between 1 and 2 threads, first at line {}:\n  1: {la}\n  2: {lb}\n(outputs kept in {} and {})",
+                n + 1,
+                one.display(),
+                two.display()
+            );
+        }
+    }
+    for dir in [one, two] {
+        let _ = std::fs::remove_dir_all(dir);
+    }
+}
