@@ -1,3 +1,4 @@
 //! Test support and an example plugin stage (see `plugin`).
 
 pub mod plugin;
+pub mod support;

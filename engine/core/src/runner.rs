@@ -177,7 +177,7 @@ fn run_in_pool(mut scenario: Scenario, opts: &RunOptions) -> Result<(Summary, Si
         let step = sim.clock.step;
         let _span = tracing::info_span!("step", step).entered();
         for (entry, time) in pipeline.iter_mut().zip(summary.stages.iter_mut()) {
-            if step % entry.every as u64 != 0 {
+            if !step.is_multiple_of(entry.every as u64) {
                 continue;
             }
             let t0 = Instant::now();
@@ -203,7 +203,7 @@ fn run_in_pool(mut scenario: Scenario, opts: &RunOptions) -> Result<(Summary, Si
             break;
         }
         ghost_sum += count::<Ghost>(&sim.world) as f64;
-        if step % 20 == 0 {
+        if step.is_multiple_of(20) {
             update_progress(&progress, &sim, summary.fluid_particles, start.elapsed());
         }
     }

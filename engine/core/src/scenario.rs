@@ -18,7 +18,7 @@ use serde::de::{
     self, DeserializeSeed, Deserializer, EnumAccess, MapAccess, VariantAccess, Visitor,
 };
 use serde::{Deserialize, Serialize};
-use std::cell::RefCell;
+use std::cell::{Cell, RefCell};
 use std::fmt;
 use std::path::{Path, PathBuf};
 
@@ -239,7 +239,22 @@ impl<'de> Visitor<'de> for EntryVisitor {
         if !registry.contains(&name) {
             return Err(de::Error::custom(registry.unknown_message(&written)));
         }
-        variant.struct_variant(&[], ParamsVisitor { name, registry })
+        let entered = Cell::new(false);
+        let params = ParamsVisitor {
+            name,
+            registry,
+            entered: &entered,
+        };
+        variant.struct_variant(&[], params).map_err(|e| {
+            // Refused before the parameters were reached: the stage has no `(...)`.
+            if !entered.get() && e.to_string().starts_with("Expected opening `(`") {
+                de::Error::custom(format!(
+                    "write `{written}()`: a stage takes parentheses even without parameters"
+                ))
+            } else {
+                e
+            }
+        })
     }
 }
 
@@ -263,17 +278,20 @@ impl Visitor<'_> for Identifier {
     }
 }
 
-struct ParamsVisitor {
+struct ParamsVisitor<'a> {
     name: String,
     registry: StageRegistry,
+    /// Set once the parameter list has been opened.
+    entered: &'a Cell<bool>,
 }
 
-impl<'de> Visitor<'de> for ParamsVisitor {
+impl<'de> Visitor<'de> for ParamsVisitor<'_> {
     type Value = PipelineEntry;
     fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
         write!(f, "the parameters of stage `{}`", camel_case(&self.name))
     }
     fn visit_map<A: MapAccess<'de>>(self, map: A) -> Result<PipelineEntry, A::Error> {
+        self.entered.set(true);
         let mut filtered = EveryFilter {
             inner: map,
             every: None,
@@ -415,26 +433,19 @@ impl Scenario {
         REGISTRY.with(|r| *r.borrow_mut() = Some(registry.clone()));
         let parsed: Result<ScenarioSpec, _> = ron_options().from_str(&text);
         REGISTRY.with(|r| *r.borrow_mut() = None);
+        let doc = Doc::new(&text);
         let spec = parsed.map_err(|e| {
             let (line, column) = (e.span.start.line, e.span.start.col);
+            let (field, message) = name_field(&doc, line, column, e.code.to_string());
             LoadError {
                 file: file.to_string(),
                 line,
                 column,
-                field: field_before(&text, line, column),
-                message: e.code.to_string(),
-            }
-        })?;
-        let at = |field: &str, message: String| {
-            let (line, column) = locate(&text, field);
-            LoadError {
-                file: file.to_string(),
-                line,
-                column,
-                field: Some(field.to_string()),
+                field,
                 message,
             }
-        };
+        })?;
+        let at = Locator { file, doc: &doc };
         validate(spec, &at, PathBuf::from(file))
     }
 
@@ -625,13 +636,9 @@ impl Scenario {
 }
 
 /// Checks that need more than one field, and derives ds, h and c_0.
-fn validate(
-    spec: ScenarioSpec,
-    at: &dyn Fn(&str, String) -> LoadError,
-    source: PathBuf,
-) -> Result<Scenario, LoadError> {
+fn validate(spec: ScenarioSpec, at: &Locator, source: PathBuf) -> Result<Scenario, LoadError> {
     let first = spec.fluid_blocks.first().ok_or_else(|| {
-        at(
+        at.field(
             "fluid_blocks",
             "no fluid: give at least one block `(min: (x, y), size: (w, h))`".into(),
         )
@@ -640,7 +647,7 @@ fn validate(
         Resolution::Spacing(ds) => ds.0,
         Resolution::ParticlesAcross(n) if n >= 2 => first.size.0 .0 / n as f64,
         Resolution::ParticlesAcross(n) => {
-            return Err(at(
+            return Err(at.field(
                 "resolution",
                 format!("ParticlesAcross({n}) is out of range; accepted: 2 or more"),
             ))
@@ -652,13 +659,13 @@ fn validate(
         .map(|b| (b.size.0 .0 / spacing + 1e-9).floor() * (b.size.1 .0 / spacing + 1e-9).floor())
         .sum();
     if count > MAX_PARTICLES {
-        return Err(at(
+        return Err(at.field(
             "resolution",
             format!("{count:.0} fluid particles would not fit; accepted: at most {MAX_PARTICLES:.0} (use a coarser resolution)"),
         ));
     }
     if count < 1.0 {
-        return Err(at(
+        return Err(at.field(
             "resolution",
             format!("spacing {spacing} m leaves the fluid blocks empty; use a finer resolution"),
         ));
@@ -673,10 +680,16 @@ fn validate(
         Some(c) => c.0,
         None if g > 0.0 => 10.0 * (2.0 * g * tallest).sqrt(),
         None => {
-            return Err(at(
+            // The cause is the zero gravity: point there.
+            let place = at
+                .doc
+                .key(&["fluid", "gravity"])
+                .or_else(|| at.doc.key(&["fluid"]));
+            return Err(at.error(
                 "sound_speed",
+                place,
                 "cannot be derived without gravity; give `sound_speed: <m/s>`".into(),
-            ))
+            ));
         }
     };
     let scenario = Scenario {
@@ -687,13 +700,25 @@ fn validate(
         source,
     };
     let walls = scenario.walls();
+    // The tank's walls come first; the rest are the `walls` list's elements.
+    let tank_walls = walls.len() - scenario.spec.walls.len();
+    let wall_place = |i: usize, key: &str| {
+        i.checked_sub(tank_walls)
+            .and_then(|k| at.doc.element(&["walls"], k, key))
+            .or_else(|| at.doc.key(&["walls"]))
+    };
     for (i, w) in walls.iter().enumerate() {
         if w.length() == 0.0 {
-            return Err(at("walls", format!("wall `{}` has zero length", w.name)));
+            return Err(at.error(
+                "walls",
+                wall_place(i, "to"),
+                format!("wall `{}` has zero length", w.name),
+            ));
         }
         if walls[..i].iter().any(|o| o.name == w.name) {
-            return Err(at(
+            return Err(at.error(
                 "walls",
+                wall_place(i, "name"),
                 format!("two walls are named `{}`; names must be unique", w.name),
             ));
         }
@@ -703,7 +728,7 @@ fn validate(
         for w in &walls {
             let s = w.abscissa(x);
             if w.distance(x) < 0.0 && s >= 0.0 && s <= w.length() {
-                return Err(at(
+                return Err(at.field(
                     "fluid_blocks",
                     format!(
                         "particle at ({:.4}, {:.4}) m starts outside wall `{}`; blocks must lie inside the walls",
@@ -714,7 +739,7 @@ fn validate(
         }
         if let Some(t) = &scenario.spec.tank {
             if x.x < 0.0 || x.x > t.width.0 || x.y < 0.0 || x.y > t.height.0 {
-                return Err(at(
+                return Err(at.field(
                     "fluid_blocks",
                     format!(
                         "particle at ({:.4}, {:.4}) m lies outside the tank (0..{} m by 0..{} m)",
@@ -725,10 +750,16 @@ fn validate(
         }
     }
     let names: Vec<&str> = walls.iter().map(|w| w.name.as_str()).collect();
-    for s in &scenario.spec.pressure_sensors {
+    let sensor_place = |i: usize, key: &str| {
+        at.doc
+            .element(&["pressure_sensors"], i, key)
+            .or_else(|| at.doc.key(&["pressure_sensors"]))
+    };
+    for (i, s) in scenario.spec.pressure_sensors.iter().enumerate() {
         let Some(w) = walls.iter().find(|w| w.name == s.wall) else {
-            return Err(at(
+            return Err(at.error(
                 "pressure_sensors",
+                sensor_place(i, "wall"),
                 format!(
                     "sensor `{}` is on wall `{}`, which does not exist; walls are: {}",
                     s.name,
@@ -739,8 +770,9 @@ fn validate(
         };
         let p = DVec2::from(s.at);
         if w.distance(p).abs() > 1e-6 || w.abscissa(p) < 0.0 || w.abscissa(p) > w.length() {
-            return Err(at(
+            return Err(at.error(
                 "pressure_sensors",
+                sensor_place(i, "at"),
                 format!(
                     "sensor `{}` at ({}, {}) is not on wall `{}`; put `at` on the wall",
                     s.name, p.x, p.y, w.name
@@ -749,7 +781,7 @@ fn validate(
         }
     }
     if scenario.spec.pipeline.is_empty() {
-        return Err(at(
+        return Err(at.field(
             "pipeline",
             "the pipeline is empty; list the stages to run".into(),
         ));
@@ -757,55 +789,435 @@ fn validate(
     Ok(scenario)
 }
 
-/// Line and column (1-based) of the first `field:` in the text, or (0, 0).
-fn locate(text: &str, field: &str) -> (usize, usize) {
-    let pattern = format!("{field}:");
-    let mut offset = 0;
-    while let Some(found) = text[offset..].find(&pattern) {
-        let start = offset + found;
-        let before_ok = text[..start]
-            .chars()
-            .next_back()
-            .is_none_or(|c| !c.is_alphanumeric() && c != '_');
-        if before_ok {
-            let line = text[..start].matches('\n').count() + 1;
-            let column = start - text[..start].rfind('\n').map_or(0, |n| n + 1) + 1;
-            return (line, column);
-        }
-        offset = start + pattern.len();
-    }
-    (0, 0)
+/// Builds the errors of [`validate`]: each names its field and points at a token of
+/// the file (or nowhere, line 0, when there is none to point at).
+struct Locator<'a> {
+    file: &'a str,
+    doc: &'a Doc<'a>,
 }
 
-/// The name of the field whose value the position (1-based line, column) falls in:
-/// the last `name:` before it.
-fn field_before(text: &str, line: usize, column: usize) -> Option<String> {
-    let mut offset = 0;
-    for (i, l) in text.split_inclusive('\n').enumerate() {
-        if i + 1 == line {
-            offset += (column.saturating_sub(1)).min(l.len());
-            break;
+impl Locator<'_> {
+    /// An error about `field`, placed at token `place`.
+    fn error(&self, field: &str, place: Option<usize>, message: String) -> LoadError {
+        let (line, column) = place.map_or((0, 0), |t| self.doc.line_col(t));
+        LoadError {
+            file: self.file.to_string(),
+            line,
+            column,
+            field: Some(field.to_string()),
+            message,
         }
-        offset += l.len();
     }
-    let before = text.get(..offset.min(text.len()))?;
-    let bytes = before.as_bytes();
-    let mut i = bytes.len();
-    while i > 0 {
-        i -= 1;
-        if bytes[i] == b':'
-            && (i + 1 >= bytes.len() || bytes[i + 1] != b':')
-            && (i == 0 || bytes[i - 1] != b':')
-        {
-            let end = before[..i].trim_end().len();
-            let start = before[..end]
-                .rfind(|c: char| !(c.is_alphanumeric() || c == '_'))
-                .map_or(0, |s| s + 1);
-            let name = &before[start..end];
-            if !name.is_empty() && !name.starts_with(|c: char| c.is_ascii_digit()) {
-                return Some(name.to_string());
+
+    /// An error about the top-level `field`, placed at its `field:`.
+    fn field(&self, field: &str, message: String) -> LoadError {
+        self.error(field, self.doc.key(&[field]), message)
+    }
+}
+
+/// The field a RON error is about, and its message without a duplicated field name.
+fn name_field(doc: &Doc, line: usize, column: usize, message: String) -> (Option<String>, String) {
+    if let Some((field, rest)) = leading_field(&message) {
+        return (Some(field), rest);
+    }
+    if let Some(field) = unknown_field(&message) {
+        return (Some(field), message);
+    }
+    (doc.field_before(doc.offset(line, column)), message)
+}
+
+/// A message written "field `x` = v is out of range; ..." (or "field `x`: ...") as
+/// (`x`, "v is out of range; ...").
+fn leading_field(message: &str) -> Option<(String, String)> {
+    let rest = message.strip_prefix("field `")?;
+    let end = rest.find('`')?;
+    let name = &rest[..end];
+    if name.is_empty() || !name.chars().all(|c| c.is_alphanumeric() || c == '_') {
+        return None;
+    }
+    let after = &rest[end + 1..];
+    let after = after
+        .strip_prefix(" = ")
+        .or_else(|| after.strip_prefix(": "))
+        .unwrap_or(after)
+        .trim_start();
+    if after.is_empty() {
+        return None;
+    }
+    Some((name.to_string(), after.to_string()))
+}
+
+/// The field named by an unknown-field message: ron's "Unexpected field named `x`
+/// ..." or serde's "unknown field `x`, ...".
+fn unknown_field(message: &str) -> Option<String> {
+    let rest = ["Unexpected field named `", "unknown field `"]
+        .iter()
+        .find_map(|p| message.strip_prefix(p))?;
+    let name = &rest[..rest.find('`')?];
+    let name = name.strip_prefix("r#").unwrap_or(name);
+    (!name.is_empty()).then(|| name.to_string())
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Kind {
+    Ident,
+    Colon,
+    /// `(`, `[` or `{`.
+    Open,
+    /// `)`, `]` or `}`.
+    Close,
+    Comma,
+    Str,
+    Other,
+}
+
+/// A token of the scenario text: byte range and nesting depth (the number of groups
+/// open around it; an opening or closing bracket has the depth outside its group).
+#[derive(Clone, Copy, Debug)]
+struct Token {
+    kind: Kind,
+    start: usize,
+    end: usize,
+    depth: usize,
+}
+
+/// The scenario text as tokens, comments and whitespace left out, so that places in it
+/// can be found by structure: the `name:` of a field, the n-th element of a list.
+/// Lenient: any text tokenizes (unterminated strings and comments run to the end).
+struct Doc<'a> {
+    text: &'a str,
+    toks: Vec<Token>,
+}
+
+impl<'a> Doc<'a> {
+    fn new(text: &'a str) -> Self {
+        Self {
+            text,
+            toks: tokenize(text),
+        }
+    }
+
+    /// The text of token `i`.
+    fn name(&self, i: usize) -> &str {
+        let t = self.toks[i];
+        self.text.get(t.start..t.end).unwrap_or("")
+    }
+
+    /// Whether token `i` is a field name: an identifier followed by `:`.
+    fn is_key(&self, i: usize) -> bool {
+        self.toks[i].kind == Kind::Ident
+            && self.toks.get(i + 1).is_some_and(|t| t.kind == Kind::Colon)
+    }
+
+    /// Token of the field `path[last]` inside ... inside the top-level `path[0]`.
+    fn key(&self, path: &[&str]) -> Option<usize> {
+        let (mut lo, mut hi, mut depth) = (0, self.toks.len(), 1);
+        let mut found = None;
+        for name in path {
+            let i = (lo..hi).find(|&i| {
+                self.toks[i].depth == depth && self.is_key(i) && self.name(i) == *name
+            })?;
+            found = Some(i);
+            lo = i + 2;
+            hi = self.value_end(lo, depth);
+            depth += 1;
+        }
+        found
+    }
+
+    /// End (exclusive token index) of the value starting at token `from`, at `depth`.
+    fn value_end(&self, from: usize, depth: usize) -> usize {
+        (from..self.toks.len())
+            .find(|&j| {
+                let t = self.toks[j];
+                (t.kind == Kind::Comma && t.depth == depth)
+                    || (t.kind == Kind::Close && t.depth < depth)
+            })
+            .unwrap_or(self.toks.len())
+    }
+
+    /// Token of field `key` in element `n` of the list at `path`, or else of the
+    /// element itself.
+    fn element(&self, path: &[&str], n: usize, key: &str) -> Option<usize> {
+        let open = self.key(path)? + 2;
+        let list = self.toks.get(open)?;
+        if list.kind != Kind::Open || self.name(open) != "[" {
+            return None;
+        }
+        let depth = list.depth + 1;
+        let (mut count, mut at_start) = (0, true);
+        for j in open + 1..self.toks.len() {
+            let t = self.toks[j];
+            if t.depth < depth {
+                return None;
+            }
+            if t.kind == Kind::Comma && t.depth == depth {
+                count += 1;
+                at_start = true;
+            } else if at_start {
+                if count == n {
+                    return Some(self.key_within(j, key).unwrap_or(j));
+                }
+                at_start = false;
             }
         }
+        None
     }
-    None
+
+    /// Token of field `key` directly inside the struct starting at token `start`
+    /// (`(...)` or `Name(...)`).
+    fn key_within(&self, start: usize, key: &str) -> Option<usize> {
+        let open = match self.toks[start].kind {
+            Kind::Open => start,
+            Kind::Ident if self.toks.get(start + 1)?.kind == Kind::Open => start + 1,
+            _ => return None,
+        };
+        let depth = self.toks[open].depth + 1;
+        (open + 1..self.toks.len())
+            .take_while(|&j| self.toks[j].depth >= depth)
+            .find(|&j| self.toks[j].depth == depth && self.is_key(j) && self.name(j) == key)
+    }
+
+    /// The field whose value byte `offset` falls in: the last `name:` before it at
+    /// the same or an enclosing level (a `,` ends a field's value; groups closed
+    /// before `offset` are skipped).
+    fn field_before(&self, offset: usize) -> Option<String> {
+        let mut stack: Vec<Option<usize>> = vec![None];
+        for (i, t) in self.toks.iter().enumerate() {
+            if t.start >= offset {
+                break;
+            }
+            match t.kind {
+                Kind::Open => stack.push(None),
+                Kind::Close if stack.len() > 1 => {
+                    stack.pop();
+                }
+                Kind::Comma => {
+                    if let Some(top) = stack.last_mut() {
+                        *top = None;
+                    }
+                }
+                Kind::Ident if self.is_key(i) => {
+                    if let Some(top) = stack.last_mut() {
+                        *top = Some(i);
+                    }
+                }
+                _ => {}
+            }
+        }
+        let key = stack.iter().rev().find_map(|k| *k)?;
+        Some(self.name(key).to_string())
+    }
+
+    /// Byte offset of a 1-based line and column (columns count characters, as ron's
+    /// do); the end of the text when past it.
+    fn offset(&self, line: usize, column: usize) -> usize {
+        let mut offset = 0;
+        for (i, l) in self.text.split_inclusive('\n').enumerate() {
+            if i + 1 == line {
+                let col = column.saturating_sub(1);
+                return offset + l.char_indices().nth(col).map_or(l.len(), |(b, _)| b);
+            }
+            offset += l.len();
+        }
+        self.text.len()
+    }
+
+    /// 1-based line and column (in characters) of token `i`.
+    fn line_col(&self, i: usize) -> (usize, usize) {
+        let start = self.toks[i].start;
+        let before = self.text.get(..start).unwrap_or("");
+        let line = before.matches('\n').count() + 1;
+        let line_start = before.rfind('\n').map_or(0, |n| n + 1);
+        (line, before[line_start..].chars().count() + 1)
+    }
+}
+
+/// Splits RON text into tokens, skipping whitespace, `//` and (nested) `/* */`
+/// comments; strings (plain, byte and raw) and character literals are single tokens.
+fn tokenize(text: &str) -> Vec<Token> {
+    let b = text.as_bytes();
+    let len = b.len();
+    let mut toks = Vec::new();
+    let (mut i, mut depth) = (0, 0usize);
+    while i < len {
+        let start = i;
+        let c = b[i];
+        let next = b.get(i + 1).copied();
+        let kind = match c {
+            _ if c.is_ascii_whitespace() => {
+                i += 1;
+                continue;
+            }
+            b'/' if next == Some(b'/') => {
+                i = b[i..]
+                    .iter()
+                    .position(|&x| x == b'\n')
+                    .map_or(len, |n| i + n);
+                continue;
+            }
+            b'/' if next == Some(b'*') => {
+                i = block_comment_end(b, i);
+                continue;
+            }
+            b'"' => {
+                i = string_end(b, i);
+                Kind::Str
+            }
+            b'b' if next == Some(b'"') => {
+                i = string_end(b, i + 1);
+                Kind::Str
+            }
+            b'r' | b'b' if raw_string_end(b, i).is_some() => {
+                i = raw_string_end(b, i).unwrap_or(len);
+                Kind::Str
+            }
+            b'r' if next == Some(b'#') && b.get(i + 2).is_some_and(|&x| is_ident_byte(x)) => {
+                // A raw identifier `r#name`: the token is the name.
+                i += 2;
+                let name_start = i;
+                while i < len && is_ident_byte(b[i]) {
+                    i += 1;
+                }
+                toks.push(Token {
+                    kind: Kind::Ident,
+                    start: name_start,
+                    end: i,
+                    depth,
+                });
+                continue;
+            }
+            b'\'' => {
+                i = char_end(text, i).unwrap_or(i + 1);
+                Kind::Other
+            }
+            b':' => {
+                i += 1;
+                Kind::Colon
+            }
+            b',' => {
+                i += 1;
+                Kind::Comma
+            }
+            b'(' | b'[' | b'{' => {
+                i += 1;
+                Kind::Open
+            }
+            b')' | b']' | b'}' => {
+                i += 1;
+                Kind::Close
+            }
+            _ if c.is_ascii_alphabetic() || c == b'_' => {
+                while i < len && is_ident_byte(b[i]) {
+                    i += 1;
+                }
+                Kind::Ident
+            }
+            _ if c.is_ascii_digit() => {
+                while i < len && (is_ident_byte(b[i]) || b[i] == b'.') {
+                    i += 1;
+                }
+                Kind::Other
+            }
+            _ => {
+                i += 1;
+                Kind::Other
+            }
+        };
+        let token_depth = match kind {
+            Kind::Open => {
+                depth += 1;
+                depth - 1
+            }
+            Kind::Close => {
+                depth = depth.saturating_sub(1);
+                depth
+            }
+            _ => depth,
+        };
+        toks.push(Token {
+            kind,
+            start,
+            end: i,
+            depth: token_depth,
+        });
+    }
+    toks
+}
+
+fn is_ident_byte(c: u8) -> bool {
+    c.is_ascii_alphanumeric() || c == b'_'
+}
+
+/// End of the `"..."` string whose opening quote is at `i` (the end of the text if
+/// unterminated).
+fn string_end(b: &[u8], i: usize) -> usize {
+    let mut j = i + 1;
+    while j < b.len() {
+        match b[j] {
+            b'\\' => j += 2,
+            b'"' => return j + 1,
+            _ => j += 1,
+        }
+    }
+    b.len()
+}
+
+/// End of the raw string `r#"..."#` (or `br#"..."#`) starting at `i`, if one does.
+fn raw_string_end(b: &[u8], i: usize) -> Option<usize> {
+    let mut j = i;
+    if b.get(j) == Some(&b'b') {
+        j += 1;
+    }
+    if b.get(j) != Some(&b'r') {
+        return None;
+    }
+    j += 1;
+    let hashes = b[j..].iter().take_while(|&&x| x == b'#').count();
+    j += hashes;
+    if b.get(j) != Some(&b'"') {
+        return None;
+    }
+    j += 1;
+    while j < b.len() {
+        if b[j] == b'"' && b[j + 1..].iter().take_while(|&&x| x == b'#').count() >= hashes {
+            return Some(j + 1 + hashes);
+        }
+        j += 1;
+    }
+    Some(b.len())
+}
+
+/// End of the `/* ... */` comment (comments nest) starting at `i`.
+fn block_comment_end(b: &[u8], i: usize) -> usize {
+    let (mut j, mut depth) = (i + 2, 1usize);
+    while j < b.len() {
+        if b[j] == b'/' && b.get(j + 1) == Some(&b'*') {
+            depth += 1;
+            j += 2;
+        } else if b[j] == b'*' && b.get(j + 1) == Some(&b'/') {
+            depth -= 1;
+            j += 2;
+            if depth == 0 {
+                return j;
+            }
+        } else {
+            j += 1;
+        }
+    }
+    b.len()
+}
+
+/// End of the character literal `'x'` or `'\..'` starting at `i`, if it is one.
+fn char_end(text: &str, i: usize) -> Option<usize> {
+    let rest = text.get(i + 1..)?;
+    let body = if rest.starts_with('\\') {
+        // An escape: up to the next quote, within a few characters (`'\u{1F600}'`).
+        rest.get(1..)?.find('\'').filter(|&n| n <= 10)? + 1
+    } else {
+        rest.chars().next()?.len_utf8()
+    };
+    rest.get(body..)?
+        .starts_with('\'')
+        .then_some(i + 1 + body + 1)
 }

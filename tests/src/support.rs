@@ -1,0 +1,99 @@
+//! Helpers shared by the integration tests: scenario loading with overrides, runs into
+//! fresh temporary folders, and CSV reading for outputs and reference data.
+
+use sph_core::overrides::Override;
+use sph_core::runner::{run_keeping_state, RunOptions, Summary};
+use sph_core::{Scenario, Sim};
+use std::path::{Path, PathBuf};
+
+/// A fresh, empty output folder under the system temp folder.
+pub fn temp_out(tag: &str) -> PathBuf {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos());
+    let dir = std::env::temp_dir().join(format!("sph-tests-{tag}-{}-{nanos}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+/// Loads scenario text with `--set`-style overrides and the standard stages; panics
+/// with the loader's message on error.
+pub fn load(text: &str, file: &str, overrides: &[&str]) -> Scenario {
+    let overrides: Vec<Override> = overrides
+        .iter()
+        .map(|o| o.parse().unwrap_or_else(|e| panic!("{e}")))
+        .collect();
+    Scenario::from_str(text, file, &overrides, &sph_stages::standard_registry())
+        .unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Runs to completion on `threads` threads into a fresh folder; returns the summary,
+/// the final state and the folder.
+pub fn run_completed(scenario: Scenario, tag: &str, threads: usize) -> (Summary, Sim, PathBuf) {
+    let out = temp_out(tag);
+    let opts = RunOptions {
+        out_dir: out.clone(),
+        threads: Some(threads),
+        progress: false,
+        trace: None,
+    };
+    let (summary, sim) =
+        run_keeping_state(scenario, &opts).unwrap_or_else(|e| panic!("{tag}: {e}"));
+    assert_eq!(summary.status, "completed");
+    (summary, sim, out)
+}
+
+/// Numeric rows of a CSV file, skipping `#` comment lines; returns (header, rows).
+pub fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut lines = text
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty());
+    let header = lines
+        .next()
+        .unwrap_or_default()
+        .split(',')
+        .map(|s| s.trim().to_string())
+        .collect();
+    let rows = lines
+        .map(|l| {
+            l.split(',')
+                .map(|v| v.trim().parse().unwrap_or(f64::NAN))
+                .collect()
+        })
+        .collect();
+    (header, rows)
+}
+
+/// Column `name` of a CSV against its first column.
+pub fn series(path: &Path, name: &str) -> Vec<(f64, f64)> {
+    let (header, rows) = read_csv(path);
+    let k = header
+        .iter()
+        .position(|h| h == name)
+        .unwrap_or_else(|| panic!("no column {name} in {}", path.display()));
+    rows.iter().map(|r| (r[0], r[k])).collect()
+}
+
+/// Reference data shipped in tests/data, sorted by its first column.
+pub fn reference(file: &str) -> Vec<(f64, f64)> {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("data")
+        .join(file);
+    let (_, rows) = read_csv(&path);
+    let mut points: Vec<(f64, f64)> = rows.iter().map(|r| (r[0], r[1])).collect();
+    points.sort_by(|a, b| a.0.total_cmp(&b.0));
+    points
+}
+
+/// Linear interpolation of a time series at `t` (clamped at the ends).
+pub fn interpolate(series: &[(f64, f64)], t: f64) -> f64 {
+    match series.iter().position(|p| p.0 >= t) {
+        Some(0) => series[0].1,
+        Some(k) => {
+            let (a, b) = (series[k - 1], series[k]);
+            a.1 + (b.1 - a.1) * (t - a.0) / (b.0 - a.0)
+        }
+        None => series.last().map_or(f64::NAN, |p| p.1),
+    }
+}
