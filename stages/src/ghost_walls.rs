@@ -86,12 +86,7 @@ impl Stage for GhostWalls {
     }
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
-        self.walls = sim
-            .world
-            .query::<&Wall>()
-            .iter()
-            .map(|w| w.clone())
-            .collect();
+        self.walls = sph_core::world::cloned::<Wall>(&sim.world);
         if self.walls.is_empty() {
             return Err(SetupError::new(
                 "ghost_walls",

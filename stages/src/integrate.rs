@@ -72,7 +72,7 @@ pub fn register(registry: &mut StageRegistry) {
                     p.collapse_fraction
                 ));
             }
-            if !(p.density_limit > 0.0) {
+            if p.density_limit.is_nan() || p.density_limit <= 0.0 {
                 return Err(format!(
                     "field `density_limit` = {} is out of range; accepted: a number > 0",
                     p.density_limit
@@ -108,12 +108,7 @@ impl Stage for Integrate {
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         ensure_component::<Fluid, HalfVelocity>(&mut sim.world);
         ensure_component::<Fluid, HalfDensity>(&mut sim.world);
-        self.walls = sim
-            .world
-            .query::<&Wall>()
-            .iter()
-            .map(|w| w.clone())
-            .collect();
+        self.walls = sph_core::world::cloned::<Wall>(&sim.world);
         Ok(())
     }
 

@@ -186,8 +186,14 @@ impl NeighbourGrid {
             .map(|b| {
                 let mut counts = Vec::with_capacity(BLOCK);
                 let mut list = Vec::with_capacity(BLOCK * 24);
-                for i in b * BLOCK..((b + 1) * BLOCK).min(n) {
-                    let xi = fpos[i].0;
+                let first = b * BLOCK;
+                for (i, xi) in fpos
+                    .iter()
+                    .enumerate()
+                    .take(((b + 1) * BLOCK).min(n))
+                    .skip(first)
+                {
+                    let xi = xi.0;
                     let before = list.len();
                     grid.for_each_near(xi, |j| {
                         if j as usize != i && (xi - positions.get(j).0).length_squared() < r2max {

@@ -125,24 +125,9 @@ impl Stage for Probe {
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         let err = |m: String| SetupError::new("probe", m);
-        self.sensors = sim
-            .world
-            .query::<&PressureSensor>()
-            .iter()
-            .map(|s| s.clone())
-            .collect();
-        self.gauges = sim
-            .world
-            .query::<&WaveGauge>()
-            .iter()
-            .map(|g| g.clone())
-            .collect();
-        self.walls = sim
-            .world
-            .query::<&Wall>()
-            .iter()
-            .map(|w| w.clone())
-            .collect();
+        self.sensors = sph_core::world::cloned::<PressureSensor>(&sim.world);
+        self.gauges = sph_core::world::cloned::<WaveGauge>(&sim.world);
+        self.walls = sph_core::world::cloned::<Wall>(&sim.world);
         let needs_grid = !self.sensors.is_empty() && self.params.methods.contains(&Method::Shepard);
         if needs_grid && !sim.resources.contains::<Neighbours>() {
             return Err(err(

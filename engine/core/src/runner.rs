@@ -97,7 +97,7 @@ pub enum RunError {
         error: StepError,
         summary: Box<Summary>,
     },
-    #[error("output folder {path}: {message}")]
+    #[error("output {path}: {message}")]
     Output { path: String, message: String },
 }
 
@@ -120,20 +120,26 @@ pub fn run_keeping_state(
             path: "thread pool".into(),
             message: e.to_string(),
         })?;
-    let trace_guard = opts.trace.as_ref().map(|path| {
-        let (layer, guard) = tracing_chrome::ChromeLayerBuilder::new()
-            .file(path)
-            .include_args(true)
-            .build();
-        use tracing_subscriber::prelude::*;
-        (tracing_subscriber::registry().with(layer), guard)
-    });
-    match trace_guard {
-        Some((subscriber, _guard)) => tracing::subscriber::with_default(subscriber, || {
-            pool.install(|| run_in_pool(scenario, opts))
-        }),
-        None => pool.install(|| run_in_pool(scenario, opts)),
+    if let Some(path) = &opts.trace {
+        // Fail before the run, with the path, rather than inside the trace writer.
+        std::fs::File::create(path).map_err(|e| RunError::Output {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })?;
     }
+    // The subscriber is installed on the pool's thread, where the run happens.
+    pool.install(|| match &opts.trace {
+        Some(path) => {
+            use tracing_subscriber::prelude::*;
+            let (layer, _guard) = tracing_chrome::ChromeLayerBuilder::new()
+                .file(path)
+                .include_args(true)
+                .build();
+            let subscriber = tracing_subscriber::registry().with(layer);
+            tracing::subscriber::with_default(subscriber, || run_in_pool(scenario, opts))
+        }
+        None => run_in_pool(scenario, opts),
+    })
 }
 
 fn run_in_pool(mut scenario: Scenario, opts: &RunOptions) -> Result<(Summary, Sim), RunError> {

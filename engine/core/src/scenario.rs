@@ -436,7 +436,13 @@ impl Scenario {
         let doc = Doc::new(&text);
         let spec = parsed.map_err(|e| {
             let (line, column) = (e.span.start.line, e.span.start.col);
-            let (field, message) = name_field(&doc, line, column, e.code.to_string());
+            let message = e.code.to_string();
+            let (field, message) = if matches!(e.code, ron::Error::Eof) {
+                // Input ended early: about the unclosed whole, not the last field.
+                (None, message)
+            } else {
+                name_field(&doc, line, column, message)
+            };
             LoadError {
                 file: file.to_string(),
                 line,
@@ -1212,8 +1218,9 @@ fn block_comment_end(b: &[u8], i: usize) -> usize {
 fn char_end(text: &str, i: usize) -> Option<usize> {
     let rest = text.get(i + 1..)?;
     let body = if rest.starts_with('\\') {
-        // An escape: up to the next quote, within a few characters (`'\u{1F600}'`).
-        rest.get(1..)?.find('\'').filter(|&n| n <= 10)? + 1
+        // An escape (the escaped character may be a quote): up to the next quote,
+        // within a few characters (`'\u{1F600}'`).
+        rest.get(2..)?.find('\'').filter(|&n| n <= 10)? + 2
     } else {
         rest.chars().next()?.len_utf8()
     };

@@ -140,3 +140,9 @@ impl<T: Component> JoinedColumn<'_, T> {
         Joined::new(&self.fluid, self.ghost.as_deref().unwrap_or(&[]))
     }
 }
+
+/// Copies of every `T` in the world (walls, sensors, gauges: the few non-particle
+/// entities), in spawn order.
+pub fn cloned<T: Component + Clone>(world: &World) -> Vec<T> {
+    world.query::<&T>().iter().cloned().collect()
+}
