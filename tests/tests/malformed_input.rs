@@ -181,41 +181,31 @@ fn cases() -> Vec<Case> {
             Any,
             &["Expected comma"],
         ),
-        Case {
-            // Known gap: the field shown is the last `name:` before the end of the file
-            // (`times` of Snapshots), unrelated to the unclosed `Scenario(`.
-            expect_known_gap: true,
-            ..case(
-                "unterminated file",
-                DAM.trim_end()
-                    .strip_suffix(')')
-                    .expect("the scenario ends with `)`")
-                    .trim_end()
-                    .to_string(),
-                LastLine,
-                AbsentOr(&["Scenario"]),
-                &["end of RON"],
-            )
-        },
-        Case {
-            // Known gap: the field shown is `every` of the earlier `Reinitialise(every:
-            // ..)` (the last `name:` before the error), not `pipeline`.
-            expect_known_gap: true,
-            ..case(
-                "unknown stage",
-                dam_stage("Forces", "Forcez(alpha: 0.03)"),
-                LineOf("Forcez("),
-                AbsentOr(&["pipeline"]),
-                &[
-                    "unknown stage `Forcez`",
-                    "nearest: `Forces`",
-                    "known stages:",
-                    "GhostWalls",
-                    "NeighbourGrid",
-                    "Integrate",
-                ],
-            )
-        },
+        case(
+            "unterminated file",
+            DAM.trim_end()
+                .strip_suffix(')')
+                .expect("the scenario ends with `)`")
+                .trim_end()
+                .to_string(),
+            LastLine,
+            AbsentOr(&["Scenario"]),
+            &["end of RON"],
+        ),
+        case(
+            "unknown stage",
+            dam_stage("Forces", "Forcez(alpha: 0.03)"),
+            LineOf("Forcez("),
+            AbsentOr(&["pipeline"]),
+            &[
+                "unknown stage `Forcez`",
+                "nearest: `Forces`",
+                "known stages:",
+                "GhostWalls",
+                "NeighbourGrid",
+                "Integrate",
+            ],
+        ),
         case(
             "unknown top-level field",
             dam("Scenario(\n", "Scenario(\n    viscosity: 0.1,\n"),
@@ -230,18 +220,13 @@ fn cases() -> Vec<Case> {
             AbsentOr(&["fluid", "gama"]),
             &["`gama`", "gamma", "sound_speed"],
         ),
-        Case {
-            // Known gap: as for the unknown stage, the field shown is `every` of the
-            // earlier Reinitialise, not `alfa`.
-            expect_known_gap: true,
-            ..case(
-                "unknown stage parameter",
-                dam_stage("Forces", "Forces(alfa: 0.1)"),
-                LineOf("Forces(alfa"),
-                AbsentOr(&["alfa", "pipeline"]),
-                &["`alfa`", "alpha", "beta", "artificial_pressure"],
-            )
-        },
+        case(
+            "unknown stage parameter",
+            dam_stage("Forces", "Forces(alfa: 0.1)"),
+            LineOf("Forces(alfa"),
+            AbsentOr(&["alfa", "pipeline"]),
+            &["`alfa`", "alpha", "beta", "artificial_pressure"],
+        ),
         case(
             "wrong type",
             dam_value("end_time", "\"two\""),
@@ -305,27 +290,22 @@ fn cases() -> Vec<Case> {
             Is("fluid_blocks"),
             &["outside wall `bottom`"],
         ),
-        Case {
-            // Known gap: the error points at the `pressure_sensors:` line (`locate`
-            // finds the field), not at the offending sensor's own line.
-            expect_known_gap: true,
-            ..case(
-                "sensor on a nonexistent wall",
-                dam_value(
-                    "pressure_sensors",
-                    "[\n        (name: \"P1\", wall: \"right\", at: (3.22, 0.16)),\n        \
-                     (name: \"P2\", wall: \"rigth\", at: (3.22, 0.584)),\n    ]",
-                ),
-                LineOf("wall: \"rigth\""),
-                Is("pressure_sensors"),
-                &[
-                    "sensor `P2`",
-                    "`rigth`",
-                    "does not exist",
-                    "left, bottom, right",
-                ],
-            )
-        },
+        case(
+            "sensor on a nonexistent wall",
+            dam_value(
+                "pressure_sensors",
+                "[\n        (name: \"P1\", wall: \"right\", at: (3.22, 0.16)),\n        \
+                 (name: \"P2\", wall: \"rigth\", at: (3.22, 0.584)),\n    ]",
+            ),
+            LineOf("wall: \"rigth\""),
+            Is("pressure_sensors"),
+            &[
+                "sensor `P2`",
+                "`rigth`",
+                "does not exist",
+                "left, bottom, right",
+            ],
+        ),
         case(
             "ParticlesAcross(1)",
             dam_value("resolution", "ParticlesAcross(1)"),
@@ -347,34 +327,23 @@ fn cases() -> Vec<Case> {
             Is("resolution"),
             &["7200000000 fluid particles", "at most 20000000"],
         ),
-        Case {
-            // Known gap: `locate` finds the first `resolution:` in the text, comments
-            // included, so the error points at the comment on line 1.
-            expect_known_gap: true,
-            ..case(
-                "field named in a comment",
-                format!(
-                    "// resolution: chosen for speed\n{}",
-                    dam_value("resolution", "ParticlesAcross(1)")
-                ),
-                LineOf("resolution: ParticlesAcross"),
-                Is("resolution"),
-                &["ParticlesAcross(1) is out of range"],
-            )
-        },
-        Case {
-            // Known gap: `locate("sound_speed")` finds the commented-out
-            // `// sound_speed: 34.3` line of the shipped file (or nothing, line 0, if
-            // that comment goes); `gravity:` is where the cause is.
-            expect_known_gap: true,
-            ..case(
-                "sound speed without gravity",
-                dam_value("gravity", "(0.0, 0.0)"),
-                LineOf("gravity:"),
-                Is("sound_speed"),
-                &["without gravity", "give `sound_speed"],
-            )
-        },
+        case(
+            "field named in a comment",
+            format!(
+                "// resolution: chosen for speed\n{}",
+                dam_value("resolution", "ParticlesAcross(1)")
+            ),
+            LineOf("resolution: ParticlesAcross"),
+            Is("resolution"),
+            &["ParticlesAcross(1) is out of range"],
+        ),
+        case(
+            "sound speed without gravity",
+            dam_value("gravity", "(0.0, 0.0)"),
+            LineOf("gravity:"),
+            Is("sound_speed"),
+            &["without gravity", "give `sound_speed"],
+        ),
         case(
             "duplicate wall name",
             dam(
@@ -445,19 +414,13 @@ fn cases() -> Vec<Case> {
                 &["-1 is out of range"],
             )
         },
-        Case {
-            // Known gap: gives "field `hydrostatic`: Expected opening `(`" — the field is
-            // GhostWalls' last parameter, and the message does not say to write
-            // `NeighbourGrid()`.
-            expect_known_gap: true,
-            ..case(
-                "stage without parentheses",
-                dam_stage("NeighbourGrid", "NeighbourGrid"),
-                LineOf("NeighbourGrid,"),
-                AbsentOr(&["pipeline"]),
-                &["NeighbourGrid()"],
-            )
-        },
+        case(
+            "stage without parentheses",
+            dam_stage("NeighbourGrid", "NeighbourGrid"),
+            LineOf("NeighbourGrid,"),
+            AbsentOr(&["pipeline"]),
+            &["NeighbourGrid()"],
+        ),
         case(
             "empty pipeline",
             dam_value("pipeline", "[]"),

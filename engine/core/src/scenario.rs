@@ -1228,3 +1228,57 @@ fn char_end(text: &str, i: usize) -> Option<usize> {
         .starts_with('\'')
         .then_some(i + 1 + body + 1)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const DAM: &str = include_str!("../../../scenarios/dam_break.ron");
+
+    #[test]
+    fn places_skip_comments_strings_and_other_levels() {
+        let text = "// a: 1\n(\n  /* b: /* nested */ 2 */ a: \"c: (\", b: [(x: 1), (x: 2, y: 'x')],\n  c: r#\"d: ]\"#,\n)";
+        let doc = Doc::new(text);
+        assert_eq!(doc.key(&["a"]).map(|t| doc.line_col(t)), Some((3, 27)));
+        assert_eq!(doc.key(&["c"]).map(|t| doc.line_col(t)), Some((4, 3)));
+        assert_eq!(doc.key(&["x"]), None);
+        let y = doc.element(&["b"], 1, "y").map(|t| doc.line_col(t));
+        assert_eq!(y, Some((3, 57)));
+        // Inside the second element, after `x: 2,`: the enclosing field is `b`.
+        let at = text.find("y:").unwrap();
+        assert_eq!(doc.field_before(at).as_deref(), Some("b"));
+        assert_eq!(doc.field_before(at - 2).as_deref(), Some("x"));
+    }
+
+    #[test]
+    fn leading_field_is_not_repeated() {
+        let (field, message) = leading_field("field `courant` = 2 is out of range").unwrap();
+        assert_eq!(
+            (field.as_str(), message.as_str()),
+            ("courant", "2 is out of range")
+        );
+        assert_eq!(
+            unknown_field("Unexpected field named `alfa`, expected `alpha`").as_deref(),
+            Some("alfa")
+        );
+    }
+
+    /// No prefix of the shipped scenario, nor of odd text, panics the loader.
+    #[test]
+    fn truncated_and_odd_input_never_panics() {
+        let registry = StageRegistry::new();
+        let odd = "(a: \"\\\", b: r##\"x\"#, c: 'é', d: '\\'', e: /* /* */ é: [(, ]}} ) r#ü: b\"";
+        for text in [DAM, odd] {
+            for (end, _) in text.char_indices() {
+                let part = &text[..end];
+                let _ = Scenario::from_str(part, "t.ron", &[], &registry);
+                let doc = Doc::new(part);
+                for (line, column) in [(1, 1), (3, 200), (500, 1), (0, 0)] {
+                    let _ = doc.field_before(doc.offset(line, column));
+                }
+                let _ = doc.element(&["pressure_sensors"], 1, "wall");
+                let _ = doc.key(&["fluid", "gravity"]);
+            }
+        }
+    }
+}
