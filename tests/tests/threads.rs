@@ -4,19 +4,10 @@
 use sph_core::overrides::Override;
 use sph_core::runner::{run, RunOptions};
 use sph_core::Scenario;
+use sph_tests::support::temp_out;
 use std::path::PathBuf;
 
 const DAM: &str = include_str!("../../scenarios/dam_break.ron");
-
-/// A fresh output folder under the system temp folder.
-fn temp_out(tag: &str) -> PathBuf {
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos());
-    let dir = std::env::temp_dir().join(format!("sph-tests-{tag}-{}-{nanos}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
-}
 
 /// Runs the small dam break on `threads` threads; returns the output folder.
 fn run_on(threads: usize) -> PathBuf {
