@@ -2,18 +2,26 @@
 //!
 //! Every fluid particle within one kernel support of a wall is mirrored across it; near
 //! a corner where two walls meet it is also mirrored across both (the double mirror).
-//! A ghost carries the mirrored position, the source's mass, a mirrored velocity (normal
-//! component reversed; tangential kept for free slip, reversed for no slip) and the
+//! A ghost carries the mirrored position, the source's mass, a mirrored velocity and the
 //! source's density, optionally corrected hydrostatically so the ghost's pressure is
-//! p_i + rho_0 g . (x_ghost - x_i). Ghost entities are kept in their own archetype and
-//! reused from step to step: only the difference in count is spawned or despawned.
+//! p_i + rho_0 (g - a_w) . (x_ghost - x_i). Ghost entities are kept in their own
+//! archetype and reused from step to step: only the difference in count is spawned or
+//! despawned.
+//!
+//! Moving walls (a rolling tank): walls are mirrored where they are at the current
+//! time, and velocities are mirrored relative to the wall's own velocity v_w at the
+//! foot of the particle on the wall: free slip reverses the normal component of
+//! v - v_w, no slip gives 2 v_w - v. The hydrostatic correction uses the effective
+//! gravity g - a_w of the tank frame, a_w the tank's rigid acceleration at the source.
 
 use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure, Velocity, Wall};
+use sph_core::motion::Pose;
 use sph_core::sim::{Sim, Tait};
 use sph_core::stage::{SetupError, Stage, StepError};
+use sph_core::walls::WallSet;
 use sph_core::world::{archetype, column, column_mut, count};
 use sph_core::StageRegistry;
 
@@ -52,7 +60,7 @@ pub fn register(registry: &mut StageRegistry) {
         |p: Params| {
             Ok(GhostWalls {
                 params: p,
-                walls: Vec::new(),
+                walls: WallSet::default(),
                 corners: Vec::new(),
             })
         },
@@ -63,11 +71,13 @@ pub fn register(registry: &mut StageRegistry) {
 #[derive(Clone, Copy, Debug)]
 pub struct GhostSettings {
     pub hydrostatic: bool,
+    /// The tank's pose when the ghosts were placed.
+    pub pose: Pose,
 }
 
 pub struct GhostWalls {
     params: Params,
-    walls: Vec<Wall>,
+    walls: WallSet,
     /// Pairs of walls sharing an end point: their corner gets double mirrors.
     corners: Vec<(usize, usize)>,
 }
@@ -86,7 +96,7 @@ impl Stage for GhostWalls {
     }
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
-        self.walls = sph_core::world::cloned::<Wall>(&sim.world);
+        self.walls = WallSet::from_world(&sim.world);
         if self.walls.is_empty() {
             return Err(SetupError::new(
                 "ghost_walls",
@@ -94,9 +104,10 @@ impl Stage for GhostWalls {
             ));
         }
         let near = |a: DVec2, b: DVec2| (a - b).length() < 1e-9;
-        for i in 0..self.walls.len() {
-            for j in i + 1..self.walls.len() {
-                let (u, v) = (&self.walls[i], &self.walls[j]);
+        let rest = self.walls.rest();
+        for i in 0..rest.len() {
+            for j in i + 1..rest.len() {
+                let (u, v) = (&rest[i], &rest[j]);
                 if near(u.a, v.a) || near(u.a, v.b) || near(u.b, v.a) || near(u.b, v.b) {
                     self.corners.push((i, j));
                 }
@@ -104,11 +115,17 @@ impl Stage for GhostWalls {
         }
         sim.resources.insert(GhostSettings {
             hydrostatic: self.params.hydrostatic,
+            pose: self.walls.pose(),
         });
         Ok(())
     }
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
+        self.walls.at(sim.clock.time);
+        let pose = self.walls.pose();
+        if let Some(s) = sim.resources.get_mut::<GhostSettings>() {
+            s.pose = pose;
+        }
         let images = self.images(sim)?;
         resize_pool(&mut sim.world, images.len());
         let Some(fluid) = archetype::<Fluid>(&sim.world) else {
@@ -127,11 +144,11 @@ impl Stage for GhostWalls {
         let (mut gr, mut gm) = (column_mut::<Density>(ghost)?, column_mut::<Mass>(ghost)?);
         let (fx, fv, fr, fm): (&[Position], &[Velocity], &[Density], &[Mass]) =
             (&fx, &fv, &fr, &fm);
-        let correction = self
-            .params
-            .hydrostatic
-            .then_some((sim.constants.eos, sim.constants.gravity));
-        let walls = &self.walls;
+        let correction =
+            self.params
+                .hydrostatic
+                .then_some((sim.constants.eos, sim.constants.gravity, pose));
+        let walls = self.walls.now();
         let slip = self.params.slip;
         (
             &mut gs[..],
@@ -148,14 +165,14 @@ impl Stage for GhostWalls {
                 walls_crossed[1] = img.second.map(|k| &walls[k as usize]);
                 let (mut pos, mut vel) = (fx[s].0, fv[s].0);
                 for w in walls_crossed.into_iter().flatten() {
+                    vel = mirror_velocity(w, pos, vel, slip);
                     pos = w.mirror(pos);
-                    vel = mirror_velocity(w, vel, slip);
                 }
                 *g = Ghost { source: img.source };
                 x.0 = pos;
                 v.0 = vel;
                 m.0 = fm[s].0;
-                rho.0 = ghost_density(fr[s].0, pos - fx[s].0, correction);
+                rho.0 = ghost_density(fr[s].0, fx[s].0, pos, correction);
             });
         Ok(())
     }
@@ -169,7 +186,7 @@ impl GhostWalls {
         };
         let pos = column::<Position>(fluid)?;
         let support = sim.constants.support();
-        let walls = &self.walls;
+        let walls = self.walls.now();
         let corners = &self.corners;
         let near = |w: &Wall, x: DVec2| {
             let (d, s) = (w.distance(x), w.abscissa(x));
@@ -207,22 +224,31 @@ impl GhostWalls {
     }
 }
 
-/// Velocity of a ghost mirrored across a fixed wall.
-fn mirror_velocity(w: &Wall, v: DVec2, slip: Slip) -> DVec2 {
+/// Velocity of the ghost of a particle at `x` moving at `v`, mirrored across wall `w`
+/// relative to the wall's velocity at the particle's foot on the wall.
+fn mirror_velocity(w: &Wall, x: DVec2, v: DVec2, slip: Slip) -> DVec2 {
+    let n = w.normal();
+    let vw = w.velocity_at(x - w.distance(x) * n);
     match slip {
-        Slip::FreeSlip => {
-            let n = w.normal();
-            v - 2.0 * v.dot(n) * n
-        }
-        Slip::NoSlip => -v,
+        Slip::FreeSlip => v - 2.0 * (v - vw).dot(n) * n,
+        Slip::NoSlip => 2.0 * vw - v,
     }
 }
 
 /// Ghost density: the source's, or with the hydrostatic correction the density whose
-/// pressure is p_source + rho_0 g . (x_ghost - x_source).
-fn ghost_density(rho_source: f64, offset: DVec2, correction: Option<(Tait, DVec2)>) -> f64 {
+/// pressure is p_source + rho_0 (g - a_w) . (x_ghost - x_source), a_w the tank's
+/// acceleration at the source.
+fn ghost_density(
+    rho_source: f64,
+    source: DVec2,
+    ghost: DVec2,
+    correction: Option<(Tait, DVec2, Pose)>,
+) -> f64 {
     match correction {
-        Some((eos, g)) => eos.density(eos.pressure(rho_source) + eos.rho0 * g.dot(offset)),
+        Some((eos, g, pose)) => {
+            let g_eff = g - pose.acceleration_at(source);
+            eos.density(eos.pressure(rho_source) + eos.rho0 * g_eff.dot(ghost - source))
+        }
         None => rho_source,
     }
 }
@@ -264,11 +290,11 @@ pub fn refresh_ghost_density(sim: &Sim) -> Result<(), StepError> {
     ) else {
         return Ok(());
     };
-    let hydrostatic = sim
+    let correction = sim
         .resources
         .get::<GhostSettings>()
-        .is_some_and(|s| s.hydrostatic);
-    let correction = hydrostatic.then_some((sim.constants.eos, sim.constants.gravity));
+        .filter(|s| s.hydrostatic)
+        .map(|s| (sim.constants.eos, sim.constants.gravity, s.pose));
     let (fx, fr) = (column::<Position>(fluid)?, column::<Density>(fluid)?);
     let (gs, gx) = (column::<Ghost>(ghost)?, column::<Position>(ghost)?);
     let mut gr = column_mut::<Density>(ghost)?;
@@ -277,7 +303,7 @@ pub fn refresh_ghost_density(sim: &Sim) -> Result<(), StepError> {
         .into_par_iter()
         .for_each(|(rho, g, x)| {
             let s = g.source as usize;
-            rho.0 = ghost_density(fr[s].0, x.0 - fx[s].0, correction);
+            rho.0 = ghost_density(fr[s].0, fx[s].0, x.0, correction);
         });
     Ok(())
 }

@@ -14,6 +14,7 @@ use serde::{Deserialize, Serialize};
 use sph_core::components::{Acceleration, Density, DensityRate, Fluid, Position, Velocity, Wall};
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
+use sph_core::walls::WallSet;
 use sph_core::world::{archetype, column_mut, ensure_component};
 use sph_core::StageRegistry;
 
@@ -30,7 +31,7 @@ pub struct Params {
     /// The run stops when any |rho/rho_0 - 1| exceeds this. Default 0.5.
     pub density_limit: f64,
     /// A particle that ends a step behind a wall is reflected back (position mirrored,
-    /// normal velocity reversed) and counted in the `wall_reflections` diagnostic of
+    /// normal velocity relative to the wall reversed) and counted in the `wall_reflections` diagnostic of
     /// summary.json; mirror ghosts cannot stop a lone fast particle because the kernel
     /// gradient vanishes as it meets its own ghost. With `false` such a particle stops
     /// the run as unstable. Default true.
@@ -81,7 +82,7 @@ pub fn register(registry: &mut StageRegistry) {
             Ok(Integrate {
                 params: p,
                 first_dt: None,
-                walls: Vec::new(),
+                walls: WallSet::default(),
             })
         },
     );
@@ -97,7 +98,8 @@ pub struct HalfDensity(pub f64);
 pub struct Integrate {
     params: Params,
     first_dt: Option<f64>,
-    walls: Vec<Wall>,
+    /// Walls where they are at the end of the step.
+    walls: WallSet,
 }
 
 impl Stage for Integrate {
@@ -108,7 +110,7 @@ impl Stage for Integrate {
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         ensure_component::<Fluid, HalfVelocity>(&mut sim.world);
         ensure_component::<Fluid, HalfDensity>(&mut sim.world);
-        self.walls = sph_core::world::cloned::<Wall>(&sim.world);
+        self.walls = WallSet::from_world(&sim.world);
         Ok(())
     }
 
@@ -200,6 +202,7 @@ impl Stage for Integrate {
         sim.clock.dt = dt;
         sim.clock.time += dt;
         sim.clock.step += 1;
+        self.walls.at(sim.clock.time);
         if self.params.reflect_at_walls {
             let reflected = self.reflect(&mut x, &mut v, &mut vh);
             if reflected > 0 {
@@ -251,14 +254,15 @@ impl Integrate {
             .into_par_iter()
             .map(|(x, v, vh)| {
                 let mut hit = 0;
-                for w in &self.walls {
+                for w in self.walls.now() {
                     let s = w.abscissa(x.0);
                     let d = w.distance(x.0);
                     if d < 0.0 && s > 0.0 && s < w.length() {
                         let n = w.normal();
+                        let vw = w.velocity_at(x.0 - d * n);
                         x.0 -= 2.0 * d * n;
-                        v.0 -= 2.0 * v.0.dot(n).min(0.0) * n;
-                        vh.0 -= 2.0 * vh.0.dot(n).min(0.0) * n;
+                        v.0 -= 2.0 * (v.0 - vw).dot(n).min(0.0) * n;
+                        vh.0 -= 2.0 * (vh.0 - vw).dot(n).min(0.0) * n;
                         hit = 1;
                     }
                 }
@@ -270,8 +274,9 @@ impl Integrate {
     /// The wall whose line the particle is behind while alongside the wall.
     fn crossed_wall(&self, p: DVec2) -> Option<&str> {
         self.walls
+            .now()
             .iter()
-            .find(|w| {
+            .find(|w: &&Wall| {
                 let s = w.abscissa(p);
                 w.distance(p) < 0.0 && s > 0.0 && s < w.length()
             })

@@ -14,18 +14,31 @@
 //!   weights dS_k = (q_{k+1} - q_{k-1})/2 (the sensor's edges close the ends).
 //!
 //! A sensor with no fluid within the kernel support reads 0 (dry).
+//!
+//! In a moving tank, sensors ride on their walls, the hydrostatic carry uses the
+//! effective gravity g - a_w of the tank frame, and gauges measure the elevation above
+//! the tank bottom along the tank's vertical. The roll moment (`roll_moment: true`) is
+//! the moment the liquid exerts on the tank about the pivot P, counter-clockwise
+//! positive, per unit depth: M = sum_i m_i (x_i - P) x (g - a_i), a_i the particle
+//! accelerations from Forces. It follows from each particle's momentum balance
+//! m_i a_i = m_i g + F_i(tank) with the particle-particle forces cancelling in pairs
+//! (they act along the line between the particles), so it equals the pressure moment
+//! on the walls without needing a wall integration; at rest it is the moment of the
+//! liquid's weight.
 
 use crate::neighbour_grid::Neighbours;
 use glam::DVec2;
 use serde::{Deserialize, Serialize};
 use sph_core::components::{
-    Density, Fluid, Mass, NeighbourCount, Position, Pressure, PressureSensor, Velocity, Wall,
-    WaveGauge,
+    Acceleration, Density, Fluid, Mass, NeighbourCount, Position, Pressure, PressureSensor, Tank,
+    Velocity, Wall, WaveGauge,
 };
 use sph_core::kernel;
+use sph_core::motion::Pose;
 use sph_core::series::SeriesWriter;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
+use sph_core::walls::WallSet;
 use sph_core::world::{archetype, column, Particles};
 use sph_core::StageRegistry;
 
@@ -67,6 +80,9 @@ pub struct Params {
     pub max_speed: bool,
     /// Minimum, mean and maximum neighbour count. Default false.
     pub neighbours: bool,
+    /// Roll angle [deg] and the liquid's roll moment about the tank pivot [N m per m
+    /// of depth]; needs a tank and Forces before Probe. Default false.
+    pub roll_moment: bool,
     /// Draw PNG plots of the series at the end of the run. Default true.
     pub plots: bool,
 }
@@ -81,6 +97,7 @@ impl Default for Params {
             density_fluctuation: false,
             max_speed: false,
             neighbours: false,
+            roll_moment: false,
             plots: true,
         }
     }
@@ -101,7 +118,7 @@ pub fn register(registry: &mut StageRegistry) {
                 params: p,
                 sensors: Vec::new(),
                 gauges: Vec::new(),
-                walls: Vec::new(),
+                walls: WallSet::default(),
                 next: 0.0,
                 out: None,
             })
@@ -113,7 +130,7 @@ pub struct Probe {
     params: Params,
     sensors: Vec<PressureSensor>,
     gauges: Vec<WaveGauge>,
-    walls: Vec<Wall>,
+    walls: WallSet,
     next: f64,
     out: Option<SeriesWriter>,
 }
@@ -127,7 +144,7 @@ impl Stage for Probe {
         let err = |m: String| SetupError::new("probe", m);
         self.sensors = sph_core::world::cloned::<PressureSensor>(&sim.world);
         self.gauges = sph_core::world::cloned::<WaveGauge>(&sim.world);
-        self.walls = sph_core::world::cloned::<Wall>(&sim.world);
+        self.walls = WallSet::from_world(&sim.world);
         let needs_grid = !self.sensors.is_empty() && self.params.methods.contains(&Method::Shepard);
         if needs_grid && !sim.resources.contains::<Neighbours>() {
             return Err(err(
@@ -141,6 +158,19 @@ impl Stage for Probe {
             return Err(err(
                 "neighbour statistics need NeighbourGrid(count: true) before Probe()".into(),
             ));
+        }
+        if self.params.roll_moment {
+            if sim.world.query::<&Tank>().iter().next().is_none() {
+                return Err(err(
+                    "roll_moment needs a `tank` (the moment is taken about its pivot)".into(),
+                ));
+            }
+            if archetype::<Fluid>(&sim.world).is_some_and(|a| !a.has::<Acceleration>()) {
+                return Err(err(
+                    "roll_moment needs the particle accelerations: put Forces() before Probe()"
+                        .into(),
+                ));
+            }
         }
         let columns = self.columns();
         if columns.is_empty() {
@@ -156,6 +186,7 @@ impl Stage for Probe {
             return Ok(());
         }
         self.next = sim.clock.time + self.params.interval;
+        self.walls.at(sim.clock.time);
         let row = self.sample(sim)?;
         if let Some(out) = &mut self.out {
             out.push(sim.clock.time, row)?;
@@ -229,6 +260,20 @@ impl Stage for Probe {
                 &["max_speed"],
             )?;
         }
+        if self.params.roll_moment {
+            out.plot(
+                &dir.join("probe_roll_angle.png"),
+                &title("roll angle"),
+                "roll angle [deg]",
+                &["roll_angle"],
+            )?;
+            out.plot(
+                &dir.join("probe_roll_moment.png"),
+                &title("liquid roll moment about the pivot"),
+                "moment [N m / m]",
+                &["roll_moment"],
+            )?;
+        }
         if self.params.neighbours {
             let names = ["neighbours_min", "neighbours_mean", "neighbours_max"];
             out.plot(
@@ -266,6 +311,7 @@ impl Probe {
                 self.params.neighbours,
                 &["neighbours_min", "neighbours_mean", "neighbours_max"][..],
             ),
+            (self.params.roll_moment, &["roll_angle", "roll_moment"][..]),
         ];
         for (on, names) in flags {
             if on {
@@ -282,23 +328,25 @@ impl Probe {
         let x = particles.fluid::<Position>()?;
         let p = particles.fluid::<Pressure>()?;
         let ds = sim.constants.spacing;
+        let pose = self.walls.pose();
         let mut row = Vec::new();
         for s in &self.sensors {
+            let wall = &self.walls.now()[s.wall];
+            let at = wall.point(s.along);
+            let carry = Carry {
+                rho0: sim.constants.eos.rho0,
+                g: sim.constants.gravity - pose.acceleration_at(at),
+            };
             for m in &self.params.methods {
                 row.push(match m {
-                    Method::Shepard => self.shepard(sim, particles, s.at)?,
-                    Method::Nearest => nearest(sim, &x, &p, s.at),
-                    Method::Averaged => averaged(sim, &x, &p, &self.walls[s.wall], s),
+                    Method::Shepard => self.shepard(sim, particles, at)?,
+                    Method::Nearest => nearest(sim, &x, &p, at, carry),
+                    Method::Averaged => averaged(sim, &x, &p, wall, s, carry),
                 });
             }
         }
         for g in &self.gauges {
-            let top = x
-                .iter()
-                .filter(|q| (q.0.x - g.x).abs() < ds)
-                .map(|q| q.0.y)
-                .fold(f64::NEG_INFINITY, f64::max);
-            row.push(if top.is_finite() { top + 0.5 * ds } else { 0.0 });
+            row.push(gauge(&x, g.x, ds, self.walls.moving().then_some(pose)));
         }
         if self.params.front {
             let front = x
@@ -336,6 +384,20 @@ impl Probe {
             let mean = n.iter().map(|c| c.0 as f64).sum::<f64>() / n.len().max(1) as f64;
             row.extend([min, mean, max]);
         }
+        if self.params.roll_moment {
+            let (a, m) = (
+                particles.fluid::<Acceleration>()?,
+                particles.fluid::<Mass>()?,
+            );
+            row.push(pose.state.angle.to_degrees());
+            row.push(roll_moment(
+                &x,
+                &a,
+                &m,
+                pose.centre(),
+                sim.constants.gravity,
+            ));
+        }
         Ok(row)
     }
 
@@ -362,13 +424,47 @@ impl Probe {
     }
 }
 
-/// Pressure of a fluid particle carried hydrostatically to point `to`.
-fn carried(sim: &Sim, p: f64, from: DVec2, to: DVec2) -> f64 {
-    p + sim.constants.eos.rho0 * sim.constants.gravity.dot(to - from)
+/// Hydrostatic carry of a pressure in the (possibly accelerating) tank frame:
+/// p(to) = p(from) + rho_0 g_eff . (to - from).
+#[derive(Clone, Copy)]
+struct Carry {
+    rho0: f64,
+    g: DVec2,
+}
+
+impl Carry {
+    fn carry(self, p: f64, from: DVec2, to: DVec2) -> f64 {
+        p + self.rho0 * self.g.dot(to - from)
+    }
+}
+
+/// Free-surface elevation at tank-frame abscissa `x`: the highest fluid particle within
+/// ds of the line, plus ds/2, measured in the tank frame when `pose` is given. 0 if dry.
+fn gauge(positions: &[Position], x: f64, ds: f64, pose: Option<Pose>) -> f64 {
+    let top = positions
+        .iter()
+        .map(|q| pose.map_or(q.0, |p| p.to_body(q.0)))
+        .filter(|q| (q.x - x).abs() < ds)
+        .map(|q| q.y)
+        .fold(f64::NEG_INFINITY, f64::max);
+    if top.is_finite() {
+        top + 0.5 * ds
+    } else {
+        0.0
+    }
+}
+
+/// M = sum_i m_i (x_i - centre) x (g - a_i), counter-clockwise positive (module docs).
+pub fn roll_moment(x: &[Position], a: &[Acceleration], m: &[Mass], centre: DVec2, g: DVec2) -> f64 {
+    x.iter()
+        .zip(a)
+        .zip(m)
+        .map(|((x, a), m)| m.0 * (x.0 - centre).perp_dot(g - a.0))
+        .sum()
 }
 
 /// Method II: the nearest fluid particle within the kernel support.
-fn nearest(sim: &Sim, x: &[Position], p: &[Pressure], at: DVec2) -> f64 {
+fn nearest(sim: &Sim, x: &[Position], p: &[Pressure], at: DVec2, carry: Carry) -> f64 {
     let support2 = sim.constants.support().powi(2);
     let best = x
         .iter()
@@ -376,13 +472,20 @@ fn nearest(sim: &Sim, x: &[Position], p: &[Pressure], at: DVec2) -> f64 {
         .map(|(i, q)| (i, (q.0 - at).length_squared()))
         .filter(|&(_, d2)| d2 < support2)
         .min_by(|a, b| a.1.total_cmp(&b.1));
-    best.map_or(0.0, |(i, _)| carried(sim, p[i].0, x[i].0, at))
+    best.map_or(0.0, |(i, _)| carry.carry(p[i].0, x[i].0, at))
 }
 
 /// Method III: Oger's pseudo-sensor.
-fn averaged(sim: &Sim, x: &[Position], p: &[Pressure], wall: &Wall, s: &PressureSensor) -> f64 {
+fn averaged(
+    sim: &Sim,
+    x: &[Position],
+    p: &[Pressure],
+    wall: &Wall,
+    s: &PressureSensor,
+    carry: Carry,
+) -> f64 {
     let reach = 1.5 * sim.constants.h;
-    let centre = wall.abscissa(s.at);
+    let centre = s.along;
     let (lo, hi) = (centre - 0.5 * s.width, centre + 0.5 * s.width);
     let mut samples: Vec<(f64, f64)> = x
         .iter()
@@ -391,7 +494,7 @@ fn averaged(sim: &Sim, x: &[Position], p: &[Pressure], wall: &Wall, s: &Pressure
             let (d, a) = (wall.distance(q.0), wall.abscissa(q.0));
             ((0.0..reach).contains(&d) && (lo..=hi).contains(&a)).then(|| {
                 let on_wall = q.0 - d * wall.normal();
-                (a, carried(sim, pq.0, q.0, on_wall))
+                (a, carry.carry(pq.0, q.0, on_wall))
             })
         })
         .collect();

@@ -3,10 +3,11 @@
 
 use glam::DVec2;
 use serde::{Deserialize, Serialize};
-use sph_core::components::{Position, Pressure, Wall};
+use sph_core::components::{Position, Pressure};
 use sph_core::output::png::{write_snapshot, Snapshot};
 use sph_core::sim::Sim;
 use sph_core::stage::{Stage, StepError};
+use sph_core::walls::WallSet;
 use sph_core::world::Particles;
 use sph_core::StageRegistry;
 
@@ -88,12 +89,10 @@ impl Stage for Snapshots {
         );
         let positions: Vec<DVec2> = x.iter().map(|q| q.0).collect();
         let values: Vec<f64> = p.iter().map(|q| q.0).collect();
-        let walls: Vec<(DVec2, DVec2)> = sim
-            .world
-            .query::<&Wall>()
-            .iter()
-            .map(|w| (w.a, w.b))
-            .collect();
+        // Walls where they are now (a rolling tank's walls move).
+        let mut set = WallSet::from_world(&sim.world);
+        let walls: Vec<(DVec2, DVec2)> =
+            set.at(sim.clock.time).iter().map(|w| (w.a, w.b)).collect();
         let (mut lo, mut hi) = (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY));
         for &(a, b) in &walls {
             lo = lo.min(a).min(b);

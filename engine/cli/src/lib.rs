@@ -92,6 +92,9 @@ pub fn run_scenario(args: &RunArgs, registry: &StageRegistry) -> Result<(), Stri
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("out").join(&scenario.spec.name));
+    if scenario.spec.sweep.is_some() {
+        return run_sweep(path, &overrides, registry, &out_dir, args.threads);
+    }
     let opts = RunOptions {
         out_dir: out_dir.clone(),
         threads: args.threads,
@@ -124,4 +127,29 @@ pub fn run_scenario(args: &RunArgs, registry: &StageRegistry) -> Result<(), Stri
             out_dir.display()
         )
     })
+}
+
+/// Runs a scenario's frequency sweep: cases side by side, one thread each.
+fn run_sweep(
+    path: &std::path::Path,
+    overrides: &[Override],
+    registry: &StageRegistry,
+    out_dir: &std::path::Path,
+    threads: Option<usize>,
+) -> Result<(), String> {
+    let workers = threads.unwrap_or_else(|| {
+        std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
+    });
+    let start = std::time::Instant::now();
+    let responses =
+        sph_core::sweep::run_sweep(path, overrides, registry, out_dir, workers, &|line| {
+            println!("{line}")
+        })?;
+    println!(
+        "sweep: {} cases in {:.1} s wall on {workers} workers; response.csv and response.png in {}",
+        responses.len(),
+        start.elapsed().as_secs_f64(),
+        out_dir.display()
+    );
+    Ok(())
 }

@@ -3,6 +3,7 @@
 //! components as contiguous columns, which the hot loops borrow as slices
 //! ([`crate::world::columns`]).
 
+use crate::motion::Pose;
 use glam::DVec2;
 
 macro_rules! component {
@@ -66,11 +67,16 @@ pub struct Ghost {
 
 /// A straight wall segment from `a` to `b`; the fluid lies on its left
 /// (the inward normal is the direction a->b turned 90 degrees counter-clockwise).
+/// As a component it holds the tank-frame geometry; [`crate::walls::WallSet`] gives
+/// the walls at an instant in the world frame, with `body` the tank's pose then.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Wall {
     pub name: String,
     pub a: DVec2,
     pub b: DVec2,
+    /// Pose of the body the wall rides on, for its velocity and acceleration
+    /// (at rest for a fixed wall).
+    pub body: Pose,
 }
 
 impl Wall {
@@ -97,19 +103,39 @@ impl Wall {
     pub fn mirror(&self, x: DVec2) -> DVec2 {
         x - 2.0 * self.distance(x) * self.normal()
     }
+    /// The point at abscissa `s` along the wall.
+    pub fn point(&self, s: f64) -> DVec2 {
+        self.a + s * self.tangent()
+    }
+    /// Velocity of the wall material at world point `x` on or near it.
+    pub fn velocity_at(&self, x: DVec2) -> DVec2 {
+        self.body.velocity_at(x)
+    }
 }
 
-/// Where a wall sensor's pressure is read: point `at` on wall `wall`, over a width
-/// `width` along the wall (Method III's pseudo-sensor).
+/// The tank: an axis-aligned box in its own frame with the bottom-left inner corner at
+/// the origin, and the pivot it rolls about. A moving tank also has a
+/// [`crate::motion::Motion`] component.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Tank {
+    pub width: f64,
+    pub height: f64,
+    /// Roll axis in the tank frame; the roll moment is taken about it.
+    pub pivot: DVec2,
+}
+
+/// Where a wall sensor's pressure is read: abscissa `along` on wall `wall` (so it rides
+/// with the wall), over a width `width` along the wall (Method III's pseudo-sensor).
 #[derive(Clone, Debug, PartialEq)]
 pub struct PressureSensor {
     pub name: String,
-    pub at: DVec2,
     pub wall: usize,
+    pub along: f64,
     pub width: f64,
 }
 
-/// A wave gauge: free-surface elevation on the vertical line x = `x`.
+/// A wave gauge: free-surface elevation on the vertical line x = `x` of the tank frame,
+/// measured from the tank bottom along the tank's vertical.
 #[derive(Clone, Debug, PartialEq)]
 pub struct WaveGauge {
     pub name: String,

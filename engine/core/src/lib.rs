@@ -5,6 +5,8 @@
 pub mod components;
 pub mod frame;
 pub mod kernel;
+pub mod linear_sloshing;
+pub mod motion;
 pub mod output;
 pub mod overrides;
 pub mod registry;
@@ -13,6 +15,8 @@ pub mod scenario;
 pub mod series;
 pub mod sim;
 pub mod stage;
+pub mod sweep;
+pub mod walls;
 pub mod world;
 
 pub use registry::StageRegistry;

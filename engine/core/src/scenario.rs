@@ -7,8 +7,9 @@
 //! `file:line:column`, the field and what would be accepted.
 
 use crate::components::{Density, Position, Pressure, Velocity, Wall};
-use crate::components::{Fluid, Mass, ParticleId, PressureSensor, WaveGauge};
+use crate::components::{Fluid, Mass, ParticleId, PressureSensor, Tank, WaveGauge};
 use crate::kernel::KernelKind;
+use crate::motion::{Motion, MotionSeries, MotionSpec, Pose};
 use crate::overrides::{apply_overrides, Override};
 use crate::registry::{camel_case, snake_case, StageRegistry};
 use crate::sim::{Clock, Constants, Resources, Sim, Tait};
@@ -97,7 +98,9 @@ pub enum Resolution {
 }
 
 /// An axis-aligned tank with its bottom-left inner corner at the origin; generates the
-/// walls `left`, `bottom`, `right` and, unless `open_top`, `top`.
+/// walls `left`, `bottom`, `right` and, unless `open_top`, `top`. The scenario's
+/// geometry (walls, blocks, sensors, gauges) is written in the tank frame; with a
+/// `motion` all of it rides with the tank.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TankSpec {
@@ -108,6 +111,47 @@ pub struct TankSpec {
     /// No roof. Default true.
     #[serde(default = "yes")]
     pub open_top: bool,
+    /// Prescribed motion (roll, sway, heave or a CSV series). Default: fixed.
+    #[serde(default)]
+    pub motion: Option<MotionSpec>,
+}
+
+impl TankSpec {
+    /// The roll axis: the motion's pivot, or the centre of the bottom.
+    pub fn pivot(&self) -> DVec2 {
+        self.motion
+            .as_ref()
+            .and_then(|m| m.pivot)
+            .map_or(DVec2::new(0.5 * self.width.0, 0.0), DVec2::from)
+    }
+}
+
+/// A sweep over the roll frequency (and filling) of a rolling tank: one run per case,
+/// each `settle_periods + fit_periods` roll periods long, with the roll moment's
+/// amplitude and phase at the forcing frequency fitted over the last `fit_periods`
+/// (see `engine::sweep`).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SweepSpec {
+    /// Roll frequencies omega [rad/s].
+    pub omega: Vec<Positive>,
+    /// Filling ratios h/b (still depth over tank width) applied to the first fluid
+    /// block. Default: the scenario's own filling only.
+    #[serde(default)]
+    pub filling: Vec<Positive>,
+    /// Roll periods run before the fit window (they include the ramp). Default 6.
+    #[serde(default = "six")]
+    pub settle_periods: Positive,
+    /// Roll periods fitted. Default 4.
+    #[serde(default = "four")]
+    pub fit_periods: Positive,
+}
+
+fn six() -> Positive {
+    Positive(6.0)
+}
+fn four() -> Positive {
+    Positive(4.0)
 }
 
 fn yes() -> bool {
@@ -181,6 +225,9 @@ pub struct ScenarioSpec {
     pub pressure_sensors: Vec<SensorSpec>,
     #[serde(default)]
     pub wave_gauges: Vec<GaugeSpec>,
+    /// A frequency sweep, run by the `engine` command instead of a single run.
+    #[serde(default)]
+    pub sweep: Option<SweepSpec>,
     /// The ordered stages; see [`PipelineEntry`].
     #[serde(skip_serializing)]
     pub pipeline: Vec<PipelineEntry>,
@@ -389,6 +436,8 @@ pub struct Scenario {
     pub h: f64,
     /// Speed of sound c_0 [m/s] (given or derived).
     pub sound_speed: f64,
+    /// The tank's motion, with its series read, if the tank moves.
+    pub motion: Option<Motion>,
     /// The file it came from.
     pub source: PathBuf,
 }
@@ -496,6 +545,7 @@ impl Scenario {
                 name: name.to_string(),
                 a: DVec2::new(a.0, a.1),
                 b: DVec2::new(b.0, b.1),
+                body: Pose::default(),
             };
             walls.push(wall("left", (0.0, h), (0.0, 0.0)));
             walls.push(wall("bottom", (0.0, 0.0), (w, 0.0)));
@@ -509,6 +559,7 @@ impl Scenario {
                 name: s.name.clone(),
                 a: s.from.into(),
                 b: s.to.into(),
+                body: Pose::default(),
             });
         }
         walls
@@ -562,6 +613,8 @@ impl Scenario {
 
     /// The bounding box beyond which a particle has left the domain: the walls' box
     /// widened by four kernel supports, and for an open tank twice its height upward.
+    /// For a moving tank, the box swept by that box over the motion: a disc about the
+    /// pivot if it rolls, grown by the largest pivot displacement.
     pub fn domain(&self) -> (DVec2, DVec2) {
         let mut lo = DVec2::splat(f64::INFINITY);
         let mut hi = DVec2::splat(f64::NEG_INFINITY);
@@ -576,10 +629,32 @@ impl Scenario {
         let margin = 4.0 * self.spec.kernel.support_factor() * self.h;
         let open = self.spec.tank.as_ref().is_none_or(|t| t.open_top);
         let extra_up = if open { hi.y - lo.y } else { 0.0 };
-        (
+        let (lo, hi) = (
             lo - DVec2::splat(margin),
             hi + DVec2::new(margin, margin + extra_up),
-        )
+        );
+        let Some(m) = &self.motion else {
+            return (lo, hi);
+        };
+        let grow = DVec2::splat(m.max_offset());
+        if m.max_angle() == 0.0 {
+            return (lo - grow, hi + grow);
+        }
+        let corners = [lo, hi, DVec2::new(lo.x, hi.y), DVec2::new(hi.x, lo.y)];
+        let r = corners
+            .iter()
+            .map(|c| (*c - m.pivot).length())
+            .fold(0.0, f64::max);
+        let reach = DVec2::splat(r) + grow;
+        (m.pivot - reach, m.pivot + reach)
+    }
+
+    /// The tank's pose at t = 0 (at rest for a fixed tank).
+    pub fn initial_pose(&self) -> Pose {
+        let pivot = self.spec.tank.as_ref().map_or(DVec2::ZERO, |t| t.pivot());
+        self.motion
+            .as_ref()
+            .map_or(Pose::at_rest(pivot), |m| m.pose(0.0))
     }
 
     /// Builds the simulation state: fluid particles, walls, sensors and gauges as
@@ -587,25 +662,39 @@ impl Scenario {
     pub fn build_sim(&self, out_dir: PathBuf) -> Sim {
         let mut world = hecs::World::new();
         let particles = self.initial_particles();
-        world.spawn_batch(particles.iter().enumerate().map(|(i, &(x, rho, m))| {
+        // Particles are laid out in the tank frame and start moving with the tank.
+        let pose = self.initial_pose();
+        world.spawn_batch(particles.iter().enumerate().map(|(i, &(q, rho, m))| {
+            let x = pose.to_world(q);
             (
                 Fluid,
                 ParticleId(i as u32),
                 Position(x),
-                Velocity(DVec2::ZERO),
+                Velocity(pose.velocity_at(x)),
                 Density(rho),
                 Pressure(0.0),
                 Mass(m),
             )
         }));
+        if let Some(t) = &self.spec.tank {
+            let tank = Tank {
+                width: t.width.0,
+                height: t.height.0,
+                pivot: t.pivot(),
+            };
+            match &self.motion {
+                Some(m) => world.spawn((tank, m.clone())),
+                None => world.spawn((tank,)),
+            };
+        }
         let walls = self.walls();
         for s in &self.spec.pressure_sensors {
             let wall = walls.iter().position(|w| w.name == s.wall).unwrap_or(0);
             let width = s.width.map_or(2.0 * self.h, |w| w.0);
             world.spawn((PressureSensor {
                 name: s.name.clone(),
-                at: s.at.into(),
                 wall,
+                along: walls[wall].abscissa(s.at.into()),
                 width,
             },));
         }
@@ -698,10 +787,19 @@ fn validate(spec: ScenarioSpec, at: &Locator, source: PathBuf) -> Result<Scenari
             ));
         }
     };
+    let motion = match spec
+        .tank
+        .as_ref()
+        .and_then(|t| t.motion.as_ref().map(|m| (t, m)))
+    {
+        Some((tank, m)) => Some(motion(tank, m, at, &source)?),
+        None => None,
+    };
     let scenario = Scenario {
         h: spec.h_over_dx.0 * spacing,
         spacing,
         sound_speed,
+        motion,
         spec,
         source,
     };
@@ -786,6 +884,33 @@ fn validate(spec: ScenarioSpec, at: &Locator, source: PathBuf) -> Result<Scenari
             ));
         }
     }
+    if let Some(sweep) = &scenario.spec.sweep {
+        let place = |key: &str| {
+            at.doc
+                .key(&["sweep", key])
+                .or_else(|| at.doc.key(&["sweep"]))
+        };
+        let rolls = scenario
+            .spec
+            .tank
+            .as_ref()
+            .and_then(|t| t.motion.as_ref())
+            .is_some_and(|m| m.roll.is_some());
+        if !rolls {
+            return Err(at.error(
+                "sweep",
+                place("omega"),
+                "a sweep varies the roll frequency; give the tank a `motion: (roll: (amplitude: <deg>, period: <s>))`".into(),
+            ));
+        }
+        if sweep.omega.is_empty() {
+            return Err(at.error(
+                "omega",
+                place("omega"),
+                "no frequencies; accepted: a list of roll frequencies [rad/s], e.g. [2.0, 2.5, 3.0]".into(),
+            ));
+        }
+    }
     if scenario.spec.pipeline.is_empty() {
         return Err(at.field(
             "pipeline",
@@ -793,6 +918,65 @@ fn validate(spec: ScenarioSpec, at: &Locator, source: PathBuf) -> Result<Scenari
         ));
     }
     Ok(scenario)
+}
+
+/// The tank's motion, with its CSV series read (relative to the scenario file).
+fn motion(
+    tank: &TankSpec,
+    m: &MotionSpec,
+    at: &Locator,
+    source: &Path,
+) -> Result<Motion, LoadError> {
+    let place = |key: &str| {
+        at.doc
+            .key(&["tank", "motion", key])
+            .or_else(|| at.doc.key(&["tank", "motion"]))
+    };
+    let series = match &m.series {
+        Some(file) => {
+            if m.roll.is_some() || m.sway.is_some() || m.heave.is_some() || m.tilt != 0.0 {
+                return Err(at.error(
+                    "series",
+                    place("series"),
+                    "a motion series replaces tilt, roll, sway and heave; give either the series or the harmonics".into(),
+                ));
+            }
+            let path = source.parent().unwrap_or(Path::new(".")).join(file);
+            Some(MotionSeries::read(&path).map_err(|e| at.error("series", place("series"), e))?)
+        }
+        None => None,
+    };
+    if let Some(r) = m.ramp {
+        if !(r >= 0.0 && r.is_finite()) {
+            return Err(at.error(
+                "ramp",
+                place("ramp"),
+                format!("{r} is out of range; accepted: seconds >= 0"),
+            ));
+        }
+    }
+    for (key, h) in [("roll", &m.roll), ("sway", &m.sway), ("heave", &m.heave)] {
+        if h.as_ref()
+            .is_some_and(|h| !h.amplitude.is_finite() || !h.phase.is_finite())
+        {
+            return Err(at.error(
+                key,
+                place(key),
+                "amplitude and phase must be finite numbers".into(),
+            ));
+        }
+    }
+    if !m.tilt.is_finite() || m.tilt.abs() >= 90.0 {
+        return Err(at.error(
+            "tilt",
+            place("tilt"),
+            format!(
+                "{} is out of range; accepted: degrees between -90 and 90",
+                m.tilt
+            ),
+        ));
+    }
+    Ok(Motion::new(m, tank.pivot(), series))
 }
 
 /// Builds the errors of [`validate`]: each names its field and points at a token of

@@ -1,0 +1,442 @@
+//! Prescribed rigid-body motion of the tank: a constant tilt plus harmonic roll about a
+//! pivot, with optional sway and heave, all brought in by a smooth start; or a measured
+//! time series (time, angle[, x, y]) read from CSV.
+//!
+//! The tank frame is the frame the scenario's geometry is written in. A point q of the
+//! tank is at x = P + (s, hv) + R(theta) (q - P) in the world, P the pivot, (s, hv) the
+//! sway and heave, theta the roll angle (counter-clockwise positive).
+
+use crate::scenario::Positive;
+use glam::DVec2;
+use serde::{Deserialize, Serialize};
+use std::f64::consts::PI;
+use std::path::Path;
+
+/// A harmonic component `amplitude sin(2 pi t / period + phase)`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HarmonicSpec {
+    /// Amplitude: degrees for roll, metres for sway and heave.
+    pub amplitude: f64,
+    /// Period [s].
+    pub period: Positive,
+    /// Phase [deg]. Default 0.
+    #[serde(default)]
+    pub phase: f64,
+}
+
+/// The tank's motion as written in the scenario (`tank: (..., motion: (...))`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct MotionSpec {
+    /// Roll axis in the tank frame [m]. Default: the centre of the tank bottom.
+    pub pivot: Option<(f64, f64)>,
+    /// Constant tilt [deg], counter-clockwise, reached through the ramp. Default 0.
+    pub tilt: f64,
+    /// Roll theta(t) = amplitude [deg] sin(2 pi t / period + phase).
+    pub roll: Option<HarmonicSpec>,
+    /// Horizontal displacement of the pivot [m].
+    pub sway: Option<HarmonicSpec>,
+    /// Vertical displacement of the pivot [m].
+    pub heave: Option<HarmonicSpec>,
+    /// Smooth start [s]: tilt, roll, sway and heave are multiplied by
+    /// r(t) = (1 - cos(pi t / ramp)) / 2 until t = ramp. Default: the longest period
+    /// given (0, a sudden start, when there is none).
+    pub ramp: Option<f64>,
+    /// A CSV time series instead of the harmonics: columns time [s], angle [deg] and
+    /// optionally x, y [m] (pivot displacement); `#` comments and one header line
+    /// allowed; relative to the scenario file. Interpolated by cubic Hermite splines;
+    /// held at its end values outside its time range. No ramp applies.
+    pub series: Option<String>,
+}
+
+/// Position, velocity and acceleration of the tank frame at one instant.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RigidState {
+    /// Roll angle theta [rad], its rate [rad/s] and acceleration [rad/s^2].
+    pub angle: f64,
+    pub omega: f64,
+    pub alpha: f64,
+    /// Displacement of the pivot [m], its velocity and acceleration.
+    pub offset: DVec2,
+    pub velocity: DVec2,
+    pub acceleration: DVec2,
+}
+
+/// Where the tank frame is: maps tank-frame points to the world and back, and gives the
+/// rigid velocity and acceleration of any world point attached to the tank.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Pose {
+    /// The pivot in the tank frame (and in the world at rest).
+    pub pivot: DVec2,
+    pub state: RigidState,
+}
+
+impl Pose {
+    pub fn at_rest(pivot: DVec2) -> Self {
+        Self {
+            pivot,
+            state: RigidState::default(),
+        }
+    }
+    /// The pivot's world position.
+    pub fn centre(&self) -> DVec2 {
+        self.pivot + self.state.offset
+    }
+    /// A tank-frame point in the world.
+    pub fn to_world(&self, q: DVec2) -> DVec2 {
+        self.centre() + DVec2::from_angle(self.state.angle).rotate(q - self.pivot)
+    }
+    /// A world point in the tank frame.
+    pub fn to_body(&self, x: DVec2) -> DVec2 {
+        self.pivot + DVec2::from_angle(-self.state.angle).rotate(x - self.centre())
+    }
+    /// Velocity of the tank at world point x: V + omega k x r.
+    pub fn velocity_at(&self, x: DVec2) -> DVec2 {
+        self.state.velocity + self.state.omega * (x - self.centre()).perp()
+    }
+    /// Acceleration of the tank at world point x: A + alpha k x r - omega^2 r.
+    pub fn acceleration_at(&self, x: DVec2) -> DVec2 {
+        let r = x - self.centre();
+        self.state.acceleration + self.state.alpha * r.perp() - self.state.omega.powi(2) * r
+    }
+}
+
+/// A harmonic a sin(w t + phi) with its first two derivatives.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Wave {
+    amplitude: f64,
+    omega: f64,
+    phase: f64,
+}
+
+impl Wave {
+    fn from_spec(s: &HarmonicSpec, scale: f64) -> Self {
+        Self {
+            amplitude: s.amplitude * scale,
+            omega: 2.0 * PI / s.period.0,
+            phase: s.phase.to_radians(),
+        }
+    }
+    /// (value, first derivative, second derivative) at t.
+    fn at(&self, t: f64) -> [f64; 3] {
+        let (s, c) = (self.omega * t + self.phase).sin_cos();
+        let (a, w) = (self.amplitude, self.omega);
+        [a * s, a * w * c, -a * w * w * s]
+    }
+}
+
+/// A tabulated motion: time, angle [rad], x, y [m].
+#[derive(Clone, Debug, PartialEq)]
+pub struct MotionSeries {
+    t: Vec<f64>,
+    /// Columns angle, x, y.
+    values: [Vec<f64>; 3],
+}
+
+impl MotionSeries {
+    /// Reads `time, angle[deg][, x, y]` rows. Errors name the line.
+    pub fn read(path: &Path) -> Result<Self, String> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| format!("cannot read motion series {}: {e}", path.display()))?;
+        Self::parse(&text).map_err(|e| format!("{}: {e}", path.display()))
+    }
+
+    pub fn parse(text: &str) -> Result<Self, String> {
+        let mut t = Vec::new();
+        let mut values: [Vec<f64>; 3] = Default::default();
+        let mut header_seen = false;
+        for (n, line) in text.lines().enumerate() {
+            let line = line.trim();
+            if line.is_empty() || line.starts_with('#') {
+                continue;
+            }
+            let cells: Vec<&str> = line
+                .split([',', ';', '\t', ' '])
+                .filter(|c| !c.is_empty())
+                .collect();
+            let numbers: Result<Vec<f64>, _> = cells.iter().map(|c| c.parse::<f64>()).collect();
+            let Ok(numbers) = numbers else {
+                if t.is_empty() && !header_seen {
+                    header_seen = true;
+                    continue;
+                }
+                return Err(format!(
+                    "line {}: `{line}` is not a row of numbers; accepted: time [s], angle [deg][, x [m], y [m]]",
+                    n + 1
+                ));
+            };
+            if !(numbers.len() == 2 || numbers.len() == 4) || numbers.iter().any(|v| !v.is_finite())
+            {
+                return Err(format!(
+                    "line {}: {} values; accepted: 2 (time, angle) or 4 (time, angle, x, y) finite numbers",
+                    n + 1,
+                    numbers.len()
+                ));
+            }
+            if t.last().is_some_and(|&last| numbers[0] <= last) {
+                return Err(format!(
+                    "line {}: time {} does not increase",
+                    n + 1,
+                    numbers[0]
+                ));
+            }
+            t.push(numbers[0]);
+            values[0].push(numbers[1].to_radians());
+            values[1].push(numbers.get(2).copied().unwrap_or(0.0));
+            values[2].push(numbers.get(3).copied().unwrap_or(0.0));
+        }
+        if t.len() < 2 {
+            return Err("a motion series needs at least two rows".into());
+        }
+        Ok(Self { t, values })
+    }
+
+    /// (value, d/dt, d2/dt2) of column `k` at time `s`: cubic Hermite interpolation with
+    /// finite-difference (Catmull-Rom) slopes, so velocity is continuous.
+    fn at(&self, k: usize, s: f64) -> [f64; 3] {
+        let (t, y) = (&self.t, &self.values[k]);
+        let n = t.len();
+        if s <= t[0] {
+            return [y[0], 0.0, 0.0];
+        }
+        if s >= t[n - 1] {
+            return [y[n - 1], 0.0, 0.0];
+        }
+        let i = t.partition_point(|&ti| ti <= s) - 1;
+        let slope = |j: usize| {
+            let (a, b) = (j.saturating_sub(1), (j + 1).min(n - 1));
+            (y[b] - y[a]) / (t[b] - t[a])
+        };
+        let hstep = t[i + 1] - t[i];
+        let u = (s - t[i]) / hstep;
+        let (p0, p1, m0, m1) = (y[i], y[i + 1], slope(i) * hstep, slope(i + 1) * hstep);
+        let (u2, u3) = (u * u, u * u * u);
+        let value = (2.0 * u3 - 3.0 * u2 + 1.0) * p0
+            + (u3 - 2.0 * u2 + u) * m0
+            + (-2.0 * u3 + 3.0 * u2) * p1
+            + (u3 - u2) * m1;
+        let d1 = (6.0 * u2 - 6.0 * u) * p0
+            + (3.0 * u2 - 4.0 * u + 1.0) * m0
+            + (-6.0 * u2 + 6.0 * u) * p1
+            + (3.0 * u2 - 2.0 * u) * m1;
+        let d2 = (12.0 * u - 6.0) * p0
+            + (6.0 * u - 4.0) * m0
+            + (-12.0 * u + 6.0) * p1
+            + (6.0 * u - 2.0) * m1;
+        [value, d1 / hstep, d2 / (hstep * hstep)]
+    }
+
+    fn max_abs(&self, k: usize) -> f64 {
+        self.values[k].iter().fold(0.0, |m, v| m.max(v.abs()))
+    }
+}
+
+/// The tank's prescribed motion: a component of the tank entity.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Motion {
+    pub pivot: DVec2,
+    tilt: f64,
+    roll: Option<Wave>,
+    sway: Option<Wave>,
+    heave: Option<Wave>,
+    ramp: f64,
+    series: Option<MotionSeries>,
+}
+
+impl Motion {
+    /// From the scenario's spec; `series` is the already-read table when the spec names one.
+    pub fn new(spec: &MotionSpec, pivot: DVec2, series: Option<MotionSeries>) -> Self {
+        let wave = |s: &Option<HarmonicSpec>, scale| s.as_ref().map(|s| Wave::from_spec(s, scale));
+        let longest = [&spec.roll, &spec.sway, &spec.heave]
+            .into_iter()
+            .flatten()
+            .map(|h| h.period.0)
+            .fold(0.0, f64::max);
+        Self {
+            pivot,
+            tilt: spec.tilt.to_radians(),
+            roll: wave(&spec.roll, PI / 180.0),
+            sway: wave(&spec.sway, 1.0),
+            heave: wave(&spec.heave, 1.0),
+            ramp: spec.ramp.unwrap_or(longest).max(0.0),
+            series,
+        }
+    }
+
+    /// The ramp r(t) = (1 - cos(pi t / T_r)) / 2 and its two derivatives.
+    fn ramp(&self, t: f64) -> [f64; 3] {
+        if t >= self.ramp {
+            return [1.0, 0.0, 0.0];
+        }
+        let k = PI / self.ramp;
+        let (s, c) = (k * t.max(0.0)).sin_cos();
+        [0.5 * (1.0 - c), 0.5 * k * s, 0.5 * k * k * c]
+    }
+
+    /// Ramped value r f with derivatives (product rule).
+    fn ramped(r: [f64; 3], f: [f64; 3]) -> [f64; 3] {
+        [
+            r[0] * f[0],
+            r[1] * f[0] + r[0] * f[1],
+            r[2] * f[0] + 2.0 * r[1] * f[1] + r[0] * f[2],
+        ]
+    }
+
+    pub fn state(&self, t: f64) -> RigidState {
+        let zero = [0.0; 3];
+        let (angle, x, y) = match &self.series {
+            Some(s) => (s.at(0, t), s.at(1, t), s.at(2, t)),
+            None => {
+                let r = self.ramp(t);
+                let w = |w: &Option<Wave>| w.map_or(zero, |w| w.at(t));
+                let roll = w(&self.roll);
+                let angle = [self.tilt + roll[0], roll[1], roll[2]];
+                (
+                    Self::ramped(r, angle),
+                    Self::ramped(r, w(&self.sway)),
+                    Self::ramped(r, w(&self.heave)),
+                )
+            }
+        };
+        RigidState {
+            angle: angle[0],
+            omega: angle[1],
+            alpha: angle[2],
+            offset: DVec2::new(x[0], y[0]),
+            velocity: DVec2::new(x[1], y[1]),
+            acceleration: DVec2::new(x[2], y[2]),
+        }
+    }
+
+    pub fn pose(&self, t: f64) -> Pose {
+        Pose {
+            pivot: self.pivot,
+            state: self.state(t),
+        }
+    }
+
+    /// Largest pivot displacement over the run [m] (a bound).
+    pub fn max_offset(&self) -> f64 {
+        match &self.series {
+            Some(s) => s.max_abs(1).hypot(s.max_abs(2)),
+            None => {
+                let a = |w: &Option<Wave>| w.map_or(0.0, |w| w.amplitude.abs());
+                a(&self.sway).hypot(a(&self.heave))
+            }
+        }
+    }
+
+    /// Largest |angle| over the run [rad] (a bound).
+    pub fn max_angle(&self) -> f64 {
+        match &self.series {
+            Some(s) => s.max_abs(0),
+            None => self.tilt.abs() + self.roll.map_or(0.0, |w| w.amplitude.abs()),
+        }
+    }
+
+    /// The period of the roll harmonic, if any [s].
+    pub fn roll_period(&self) -> Option<f64> {
+        self.roll.map(|w| 2.0 * PI / w.omega)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec(text: &str) -> MotionSpec {
+        ron::Options::default()
+            .with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME)
+            .from_str(text)
+            .unwrap()
+    }
+
+    /// Central differences of the value match the derivatives the motion reports.
+    fn check_derivatives(m: &Motion, times: &[f64]) {
+        let e = 1e-5;
+        for &t in times {
+            let (a, b, c) = (m.state(t - e), m.state(t), m.state(t + e));
+            let d_angle = (c.angle - a.angle) / (2.0 * e);
+            let d_omega = (c.omega - a.omega) / (2.0 * e);
+            let d_off = (c.offset - a.offset) / (2.0 * e);
+            let d_vel = (c.velocity - a.velocity) / (2.0 * e);
+            assert!((d_angle - b.omega).abs() < 1e-6, "omega at {t}");
+            assert!((d_omega - b.alpha).abs() < 1e-4, "alpha at {t}");
+            assert!((d_off - b.velocity).length() < 1e-6, "velocity at {t}");
+            assert!(
+                (d_vel - b.acceleration).length() < 1e-4,
+                "acceleration at {t}"
+            );
+        }
+    }
+
+    #[test]
+    fn harmonic_roll_with_ramp_is_smooth_and_consistent() {
+        let m = Motion::new(
+            &spec("(roll: (amplitude: 4.0, period: 1.5), sway: (amplitude: 0.01, period: 0.7, phase: 30.0), tilt: 2.0)"),
+            DVec2::new(0.45, 0.0),
+            None,
+        );
+        // Starts at rest (the cosine ramp starts with a finite acceleration), reaches
+        // the full harmonic after one (the longest) period.
+        let s0 = m.state(0.0);
+        assert_eq!((s0.angle, s0.omega), (0.0, 0.0));
+        assert_eq!((s0.offset, s0.velocity), (DVec2::ZERO, DVec2::ZERO));
+        let late = m.state(10.0);
+        let expected = (2.0f64 + 4.0 * (2.0 * PI * 10.0 / 1.5).sin()).to_radians();
+        assert!((late.angle - expected).abs() < 1e-12);
+        check_derivatives(&m, &[0.3, 0.74, 1.2, 3.3]);
+    }
+
+    #[test]
+    fn pose_round_trips_and_gives_rigid_velocity() {
+        let m = Motion::new(
+            &spec("(roll: (amplitude: 10.0, period: 2.0), ramp: 0.0)"),
+            DVec2::new(0.5, 0.0),
+            None,
+        );
+        let pose = m.pose(0.3);
+        let q = DVec2::new(0.1, 0.4);
+        let x = pose.to_world(q);
+        assert!((pose.to_body(x) - q).length() < 1e-12);
+        // Distance to the pivot is kept; velocity is the derivative of the world position.
+        assert!(((x - pose.centre()).length() - (q - m.pivot).length()).abs() < 1e-12);
+        let e = 1e-6;
+        let dx = (m.pose(0.3 + e).to_world(q) - m.pose(0.3 - e).to_world(q)) / (2.0 * e);
+        assert!((dx - pose.velocity_at(x)).length() < 1e-8);
+        let d2x =
+            (m.pose(0.3 + 1e-4).to_world(q) - 2.0 * x + m.pose(0.3 - 1e-4).to_world(q)) / 1e-8;
+        assert!((d2x - pose.acceleration_at(x)).length() < 1e-4);
+    }
+
+    #[test]
+    fn series_interpolates_and_differentiates() {
+        // A sampled sine: the spline reproduces it and its derivatives closely.
+        let mut text = String::from("time,angle,x,y\n");
+        for i in 0..=400 {
+            let t = i as f64 * 0.01;
+            text += &format!("{t},{},{},0\n", 5.0 * (2.0 * t).sin(), 0.02 * t * t);
+        }
+        let s = MotionSeries::parse(&text).unwrap();
+        let m = Motion::new(&MotionSpec::default(), DVec2::ZERO, Some(s));
+        let st = m.state(1.234);
+        assert!((st.angle - (5.0 * (2.0f64 * 1.234).sin()).to_radians()).abs() < 1e-6);
+        assert!((st.omega - (10.0 * (2.0f64 * 1.234).cos()).to_radians()).abs() < 1e-4);
+        assert!((st.velocity.x - 0.04 * 1.234).abs() < 1e-6);
+        assert!((st.acceleration.x - 0.04).abs() < 1e-3);
+        check_derivatives(&m, &[0.505, 2.0051]);
+        assert_eq!(m.state(100.0).omega, 0.0);
+    }
+
+    #[test]
+    fn bad_series_rows_are_reported_by_line() {
+        let e = MotionSeries::parse("t,a\n0,1\n1,x\n").unwrap_err();
+        assert!(e.contains("line 3"), "{e}");
+        let e = MotionSeries::parse("0,1\n0,2\n").unwrap_err();
+        assert!(e.contains("does not increase"), "{e}");
+        let e = MotionSeries::parse("0,1,2\n").unwrap_err();
+        assert!(e.contains("accepted: 2"), "{e}");
+        assert!(MotionSeries::parse("0,1\n").is_err());
+    }
+}

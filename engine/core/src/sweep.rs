@@ -1,0 +1,373 @@
+//! Frequency sweep of a rolling tank (`sweep: (...)` in a scenario): one run per
+//! (filling, omega) case, the roll moment's amplitude and phase at the forcing
+//! frequency fitted over the last periods, written to `response.csv` and plotted
+//! against linear theory in `response.png`.
+//!
+//! Cases run side by side, one thread each: a sweep case is small (a few thousand
+//! particles), where one thread per case keeps both cores busy without the
+//! synchronisation cost of splitting a step, and each case's numbers are the same as a
+//! single-threaded run of it.
+//!
+//! The fit is least squares of M(t) = a sin(omega t) + b cos(omega t) + c over the
+//! window; amplitude sqrt(a^2 + b^2) and phase atan2(b, a), the lead of the moment over
+//! the roll angle. Linear theory is undamped, so near resonance the response keeps
+//! growing and the fitted amplitude depends on the window: it is not a steady state
+//! there.
+
+use crate::linear_sloshing::RectangularTank;
+use crate::output::plot::{plot_series, Series, Style};
+use crate::overrides::Override;
+use crate::runner::{run, RunError, RunOptions, Summary};
+use crate::{Scenario, StageRegistry};
+use std::f64::consts::PI;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+
+/// One case of a sweep.
+#[derive(Clone, Debug)]
+pub struct Case {
+    /// Still depth over tank width.
+    pub filling: f64,
+    /// Roll frequency [rad/s].
+    pub omega: f64,
+    /// Folder name under the sweep's output folder.
+    pub name: String,
+    /// The overrides that turn the base scenario into this case.
+    pub overrides: Vec<Override>,
+    /// Start of the fit window [s].
+    pub fit_from: f64,
+}
+
+/// The fitted response of one case, with linear theory beside it.
+#[derive(Clone, Debug)]
+pub struct Response {
+    pub case: Case,
+    /// Roll moment amplitude [N m per m] and phase [deg] fitted from the run.
+    pub amplitude: f64,
+    pub phase_deg: f64,
+    /// Linear theory: amplitude and phase (0 in phase with the roll, 180 antiphase).
+    pub theory_amplitude: f64,
+    pub theory_phase_deg: f64,
+    /// sigma_1 of linear theory for this filling [rad/s].
+    pub omega1: f64,
+    pub summary: Summary,
+}
+
+/// The sweep's cases from a scenario that has `sweep: (...)`.
+pub fn cases(scenario: &Scenario) -> Result<Vec<Case>, String> {
+    let spec = &scenario.spec;
+    let sweep = spec.sweep.as_ref().ok_or("the scenario has no `sweep`")?;
+    let tank = spec.tank.as_ref().ok_or("a sweep needs a `tank`")?;
+    if tank.motion.as_ref().and_then(|m| m.roll.as_ref()).is_none() {
+        return Err("a sweep varies the roll frequency: give `tank.motion.roll`".into());
+    }
+    let block = spec
+        .fluid_blocks
+        .first()
+        .ok_or("a sweep needs a fluid block")?;
+    let own = block.size.1 .0 / tank.width.0;
+    let fillings: Vec<f64> = if sweep.filling.is_empty() {
+        vec![own]
+    } else {
+        sweep.filling.iter().map(|f| f.0).collect()
+    };
+    let mut out = Vec::new();
+    for &filling in &fillings {
+        for omega in sweep.omega.iter().map(|w| w.0) {
+            let period = 2.0 * PI / omega;
+            let end = (sweep.settle_periods.0 + sweep.fit_periods.0) * period;
+            let set = |s: String| s.parse::<Override>().map_err(|e| e.to_string());
+            let mut overrides = vec![
+                set(format!("tank.motion.roll.period={period}"))?,
+                set(format!("end_time={end}"))?,
+            ];
+            if !sweep.filling.is_empty() {
+                overrides.push(set(format!(
+                    "fluid_blocks.0.size=({}, {})",
+                    block.size.0 .0,
+                    filling * tank.width.0
+                ))?);
+            }
+            out.push(Case {
+                filling,
+                omega,
+                name: format!("filling{filling:.3}_omega{omega:.3}"),
+                overrides,
+                fit_from: sweep.settle_periods.0 * period,
+            });
+        }
+    }
+    Ok(out)
+}
+
+/// Least-squares fit of y = a sin(w t) + b cos(w t) + c; returns (amplitude, phase [rad]).
+pub fn fit_harmonic(t: &[f64], y: &[f64], omega: f64) -> Option<(f64, f64)> {
+    // Normal equations of the 3-parameter linear model, solved by Cramer's rule.
+    let mut m = [[0.0; 3]; 3];
+    let mut r = [0.0; 3];
+    for (&t, &y) in t.iter().zip(y) {
+        let f = [(omega * t).sin(), (omega * t).cos(), 1.0];
+        for i in 0..3 {
+            r[i] += f[i] * y;
+            for j in 0..3 {
+                m[i][j] += f[i] * f[j];
+            }
+        }
+    }
+    let det = |m: &[[f64; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let d = det(&m);
+    if t.len() < 3 || d.abs() < 1e-12 {
+        return None;
+    }
+    let solve = |k: usize| {
+        let mut mk = m;
+        for i in 0..3 {
+            mk[i][k] = r[i];
+        }
+        det(&mk) / d
+    };
+    let (a, b) = (solve(0), solve(1));
+    Some((a.hypot(b), b.atan2(a)))
+}
+
+/// Column `name` of a CSV with a `time` first column, from `from` on.
+fn read_column(path: &Path, name: &str, from: f64) -> Result<(Vec<f64>, Vec<f64>), String> {
+    let mut reader =
+        csv::Reader::from_path(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let headers = reader.headers().map_err(|e| e.to_string())?.clone();
+    let k = headers.iter().position(|h| h == name).ok_or_else(|| {
+        format!(
+            "{}: no column `{name}`; add Probe(roll_moment: true)",
+            path.display()
+        )
+    })?;
+    let (mut t, mut y) = (Vec::new(), Vec::new());
+    for row in reader.records() {
+        let row = row.map_err(|e| format!("{}: {e}", path.display()))?;
+        let parse = |i: usize| row.get(i).and_then(|v| v.parse::<f64>().ok());
+        if let (Some(ti), Some(yi)) = (parse(0), parse(k)) {
+            if ti >= from {
+                t.push(ti);
+                y.push(yi);
+            }
+        }
+    }
+    Ok((t, y))
+}
+
+/// Runs every case (`workers` at a time, one thread each) and writes response.csv and
+/// response.png into `out_dir`. `overrides` (from the command line) apply to every case.
+pub fn run_sweep(
+    path: &Path,
+    overrides: &[Override],
+    registry: &StageRegistry,
+    out_dir: &Path,
+    workers: usize,
+    report: &(dyn Fn(&str) + Sync),
+) -> Result<Vec<Response>, String> {
+    let base = Scenario::load(path, overrides, registry).map_err(|e| e.to_string())?;
+    let cases = cases(&base)?;
+    std::fs::create_dir_all(out_dir).map_err(|e| format!("{}: {e}", out_dir.display()))?;
+    let next = AtomicUsize::new(0);
+    let results: Mutex<Vec<Option<Result<Response, String>>>> = Mutex::new(vec![None; cases.len()]);
+    std::thread::scope(|s| {
+        for _ in 0..workers.clamp(1, cases.len().max(1)) {
+            s.spawn(|| loop {
+                let i = next.fetch_add(1, Ordering::SeqCst);
+                let Some(case) = cases.get(i) else { break };
+                let r = run_case(path, overrides, registry, out_dir, case);
+                match &r {
+                    Ok(r) => report(&format!(
+                        "case {}/{} {}: amplitude {:.4} N m, phase {:.1} deg (linear theory {:.4}, {:.0} deg), {:.1} s wall",
+                        i + 1,
+                        cases.len(),
+                        case.name,
+                        r.amplitude,
+                        r.phase_deg,
+                        r.theory_amplitude,
+                        r.theory_phase_deg,
+                        r.summary.wall_seconds
+                    )),
+                    Err(e) => report(&format!("case {}/{} {}: {e}", i + 1, cases.len(), case.name)),
+                }
+                results.lock().unwrap_or_else(|p| p.into_inner())[i] = Some(r);
+            });
+        }
+    });
+    let results = results.into_inner().unwrap_or_else(|p| p.into_inner());
+    let mut responses = Vec::new();
+    let mut failures = Vec::new();
+    for r in results.into_iter().flatten() {
+        match r {
+            Ok(r) => responses.push(r),
+            Err(e) => failures.push(e),
+        }
+    }
+    write_response(out_dir, &base, &responses)?;
+    if failures.is_empty() {
+        Ok(responses)
+    } else {
+        Err(format!(
+            "{} of {} cases failed (the others are in response.csv):\n{}",
+            failures.len(),
+            cases.len(),
+            failures.join("\n")
+        ))
+    }
+}
+
+fn run_case(
+    path: &Path,
+    overrides: &[Override],
+    registry: &StageRegistry,
+    out_dir: &Path,
+    case: &Case,
+) -> Result<Response, String> {
+    let mut all = overrides.to_vec();
+    all.extend(case.overrides.iter().cloned());
+    let scenario = Scenario::load(path, &all, registry).map_err(|e| e.to_string())?;
+    let tank = scenario.spec.tank.clone().ok_or("no tank")?;
+    let roll = tank
+        .motion
+        .as_ref()
+        .and_then(|m| m.roll.clone())
+        .ok_or("no roll")?;
+    let theta_a = roll.amplitude.to_radians();
+    let linear = linear_tank(&scenario, case.filling);
+    let axis_height = tank.pivot().y;
+    let dir = out_dir.join(&case.name);
+    let opts = RunOptions {
+        out_dir: dir.clone(),
+        threads: Some(1),
+        progress: false,
+        trace: None,
+    };
+    let summary = match run(scenario, &opts) {
+        Ok(s) => s,
+        Err(RunError::Step { error, .. }) => {
+            return Err(format!("{error} (outputs in {})", dir.display()))
+        }
+        Err(e) => return Err(e.to_string()),
+    };
+    let (t, m) = read_column(&dir.join("probes.csv"), "roll_moment", case.fit_from)?;
+    let (amplitude, phase) = fit_harmonic(&t, &m, case.omega)
+        .ok_or_else(|| format!("too few samples to fit in {}", dir.display()))?;
+    let c = linear.roll_moment_per_radian(case.omega, axis_height) * theta_a;
+    Ok(Response {
+        case: case.clone(),
+        amplitude,
+        phase_deg: phase.to_degrees(),
+        theory_amplitude: c.abs(),
+        theory_phase_deg: if c >= 0.0 { 0.0 } else { 180.0 },
+        omega1: linear.natural_frequency(1),
+        summary,
+    })
+}
+
+/// response.csv (one row per case) and response.png (amplitude against omega, one
+/// colour per filling, with the linear-theory curves).
+fn write_response(out_dir: &Path, base: &Scenario, responses: &[Response]) -> Result<(), String> {
+    let mut csv = String::from(
+        "filling,omega,omega_over_omega1,amplitude,phase_deg,theory_amplitude,theory_phase_deg,amplitude_error,wall_seconds,steps,particle_steps_per_second\n",
+    );
+    for r in responses {
+        let _ = writeln!(
+            csv,
+            "{},{},{},{},{},{},{},{},{},{},{}",
+            r.case.filling,
+            r.case.omega,
+            r.case.omega / r.omega1,
+            r.amplitude,
+            r.phase_deg,
+            r.theory_amplitude,
+            r.theory_phase_deg,
+            r.amplitude / r.theory_amplitude - 1.0,
+            r.summary.wall_seconds,
+            r.summary.steps,
+            r.summary.particle_steps_per_second
+        );
+    }
+    let csv_path = out_dir.join("response.csv");
+    crate::output::atomic::write_atomic(&csv_path, csv.as_bytes())
+        .map_err(|e| format!("{}: {e}", csv_path.display()))?;
+    if responses.is_empty() {
+        return Ok(());
+    }
+    let mut series = Vec::new();
+    let mut fillings: Vec<f64> = responses.iter().map(|r| r.case.filling).collect();
+    fillings.dedup();
+    let (lo, hi) = responses
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |(lo, hi), r| {
+            (lo.min(r.case.omega), hi.max(r.case.omega))
+        });
+    let top = responses.iter().map(|r| r.amplitude).fold(0.0, f64::max);
+    for f in fillings {
+        let these: Vec<&Response> = responses.iter().filter(|r| r.case.filling == f).collect();
+        series.push(Series {
+            name: format!("SPH, h/b = {f:.3}"),
+            points: these.iter().map(|r| (r.case.omega, r.amplitude)).collect(),
+            style: Style::Points,
+        });
+        series.push(Series {
+            name: format!("linear theory, h/b = {f:.3}"),
+            points: theory_curve(base, f, lo, hi, 2.0 * top),
+            style: Style::Line,
+        });
+    }
+    let png = out_dir.join("response.png");
+    plot_series(
+        &png,
+        &format!("{}: roll moment amplitude", base.spec.name),
+        "roll frequency omega [rad/s]",
+        "moment amplitude [N m / m]",
+        &series,
+    )
+    .map_err(|e| e.to_string())
+}
+
+/// Linear-theory amplitude against omega for filling `f`, cut off above `cap` (it
+/// diverges at resonance; NaN breaks the line there).
+fn theory_curve(base: &Scenario, f: f64, lo: f64, hi: f64, cap: f64) -> Vec<(f64, f64)> {
+    let Some(tank) = &base.spec.tank else {
+        return Vec::new();
+    };
+    let theta_a = tank
+        .motion
+        .as_ref()
+        .and_then(|m| m.roll.as_ref())
+        .map_or(0.0, |r| r.amplitude.to_radians());
+    let linear = linear_tank(base, f);
+    let (lo, hi) = (0.9 * lo, 1.1 * hi);
+    (0..=400)
+        .map(|i| {
+            let w = lo + (hi - lo) * i as f64 / 400.0;
+            let a = (linear.roll_moment_per_radian(w, tank.pivot().y) * theta_a).abs();
+            (w, if a <= cap { a } else { f64::NAN })
+        })
+        .collect()
+}
+
+/// The linear-theory tank of a case: the depth the particle lattice actually fills
+/// (whole rows of ds, see `Scenario::initial_particles`) at filling `f`.
+pub fn linear_tank(scenario: &Scenario, f: f64) -> RectangularTank {
+    let width = scenario.spec.tank.as_ref().map_or(1.0, |t| t.width.0);
+    let ds = scenario.spacing;
+    RectangularTank {
+        breadth: width,
+        depth: (f * width / ds + 1e-9).floor() * ds,
+        density: scenario.spec.fluid.density.0,
+        gravity: glam::DVec2::from(scenario.spec.fluid.gravity).length(),
+    }
+}
+
+/// The sweep's output folder: `out/<name>` unless given.
+pub fn default_out(base_name: &str) -> PathBuf {
+    PathBuf::from("out").join(base_name)
+}
