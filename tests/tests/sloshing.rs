@@ -33,6 +33,7 @@ fn tilted_tank_at_rest_has_a_level_surface_hydrostatic_sensors_and_the_static_mo
             depth: h,
             density: rho0,
             gravity: g,
+            viscosity: 0.0,
         }
         .natural_frequency(1);
     let (summary, sim, out) = run_completed(scenario, "tilted_tank", 2);
@@ -128,5 +129,100 @@ fn sensors_ride_with_the_tank() {
                 s.name
             );
         }
+    }
+}
+
+#[test]
+fn small_roll_response_peaks_at_the_first_natural_frequency_and_matches_linear_theory_off_it() {
+    // Roll of 0.5 deg (linear), h/ds = 12, swept across the first mode
+    // (sigma_1 = 7.239 rad/s for L = 0.5 m, h = 0.2 m). Each case: one-period smooth
+    // start, 5 periods to settle, 5 fitted.
+    let sigma1 = 7.238827;
+    let ratios = [0.7, 0.94, 0.97, 1.0, 1.03, 1.06, 1.3];
+    let omegas: Vec<String> = ratios.iter().map(|r| format!("{}", r * sigma1)).collect();
+    let overrides: Vec<sph_core::overrides::Override> = [
+        "resolution=Spacing(0.016666666666666666)".to_string(),
+        "tank.motion=(roll: (amplitude: 0.5, period: 1.0))".to_string(),
+        format!(
+            "sweep=(omega: [{}], settle_periods: 5.0, fit_periods: 5.0)",
+            omegas.join(", ")
+        ),
+    ]
+    .iter()
+    .map(|o| o.parse().unwrap())
+    .collect();
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/rolling_tank.ron");
+    let out = sph_tests::support::temp_out("roll_sweep");
+    let responses = sph_core::sweep::run_sweep(
+        &path,
+        &overrides,
+        &sph_stages::standard_registry(),
+        &out,
+        2,
+        &|line| eprintln!("{line}"),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(responses.len(), ratios.len());
+    assert!(out.join("response.csv").exists() && out.join("response.png").exists());
+    let omega1 = responses[0].omega1;
+    assert!((omega1 / sigma1 - 1.0).abs() < 1e-5);
+
+    // Peak of the fitted amplitude: the vertex of the parabola through the largest
+    // sample and its neighbours. Within 3 % of sigma_1 (the criterion); the
+    // same estimate on linear theory (same start and window) is printed beside it.
+    let peak = |amp: &dyn Fn(&sph_core::sweep::Response) -> f64| {
+        let k = (1..responses.len() - 1)
+            .max_by(|&a, &b| amp(&responses[a]).total_cmp(&amp(&responses[b])))
+            .unwrap();
+        let (w, a) = (
+            [-1, 0, 1].map(|d| responses[(k as i64 + d) as usize].case.omega),
+            [-1, 0, 1].map(|d| amp(&responses[(k as i64 + d) as usize])),
+        );
+        // Vertex of the parabola through three points.
+        let num = (w[1] - w[0]).powi(2) * (a[1] - a[2]) - (w[1] - w[2]).powi(2) * (a[1] - a[0]);
+        let den = (w[1] - w[0]) * (a[1] - a[2]) - (w[1] - w[2]) * (a[1] - a[0]);
+        w[1] - 0.5 * num / den
+    };
+    let sph_peak = peak(&|r| r.amplitude);
+    let linear_peak = peak(&|r| r.linear_amplitude);
+    eprintln!(
+        "response peak: SPH {:.4} sigma_1, linear theory (same window) {:.4} sigma_1",
+        sph_peak / sigma1,
+        linear_peak / sigma1
+    );
+    assert!(
+        (sph_peak / sigma1 - 1.0).abs() < 0.03,
+        "SPH response peaks at {:.4} sigma_1",
+        sph_peak / sigma1
+    );
+
+    // Off resonance (|sigma/sigma_1 - 1| = 0.3, outside analytic.md's +-0.15 band):
+    // amplitude within 10 % of linear theory for the same motion, start and fit window
+    // (damped by the scheme's equivalent viscosity), phase within 10 degrees.
+    // The 10 %: at h/ds = 12 the first-mode frequency is good to ~2 % (the peak above),
+    // and the linear amplitude moves 2/|1 - r^2| = 4x (r = 0.7) and 3x (r = 1.3) as
+    // fast as sigma_1, so 6-8 %; the fit of the decaying start-up transient adds ~2 %.
+    // analytic.md's 5 % presumes h/ds >= 40.
+    for r in responses
+        .iter()
+        .filter(|r| (r.case.omega / sigma1 - 1.0).abs() > 0.25)
+    {
+        let error = r.amplitude / r.linear_amplitude - 1.0;
+        eprintln!(
+            "omega {:.3}: amplitude {:.4} vs linear {:.4} N m ({:+.1} %), phase {:.1} vs {:.1} deg",
+            r.case.omega,
+            r.amplitude,
+            r.linear_amplitude,
+            100.0 * error,
+            r.phase_deg,
+            r.linear_phase_deg
+        );
+        assert!(
+            error.abs() < 0.10,
+            "omega {}: amplitude error {:.1} %",
+            r.case.omega,
+            100.0 * error
+        );
+        assert!((r.phase_deg - r.linear_phase_deg).abs() < 10.0);
     }
 }

@@ -19,6 +19,10 @@ pub struct RectangularTank {
     pub density: f64,
     /// Gravity g [m/s^2].
     pub gravity: f64,
+    /// Kinematic viscosity nu [m^2/s] damping each mode's amplitude at the rate
+    /// 2 nu k_n^2 (Lamb 1932, section 348; analytic.md section 4); 0 for the undamped
+    /// theory. For SPH with artificial viscosity, nu = alpha h c_0 / 8 (Monaghan 2005).
+    pub viscosity: f64,
 }
 
 impl RectangularTank {
@@ -28,10 +32,24 @@ impl RectangularTank {
         (self.gravity * k * (k * self.depth).tanh()).sqrt()
     }
 
-    /// Steady-state roll moment about the roll axis R, per unit tank width, as the
-    /// signed coefficient c of M_R(t) = c theta_a sin(sigma t) (per radian of roll
+    /// Amplitude decay rate of mode k: gamma = 2 nu k^2.
+    fn damping(&self, k: f64) -> f64 {
+        2.0 * self.viscosity * k * k
+    }
+
+    /// Undamped steady-state roll moment about the roll axis R, per unit tank width, as
+    /// the signed coefficient c of M_R(t) = c theta_a sin(sigma t) (per radian of roll
     /// amplitude): c > 0 in phase with the roll, c < 0 in antiphase. `axis_height` is
-    /// R's height above the tank bottom. Undamped, so it diverges at each odd sigma_n.
+    /// R's height above the tank bottom. Diverges at each odd sigma_n. (With
+    /// `viscosity` > 0 this is the in-phase part; see [`Self::roll_moment_response`].)
+    pub fn roll_moment_per_radian(&self, sigma: f64, axis_height: f64) -> f64 {
+        self.roll_moment_response(sigma, axis_height).0
+    }
+
+    /// Steady-state roll moment about R per radian of roll as a complex amplitude
+    /// (in phase, quadrature): M_R(t) = re sin(sigma t) + im cos(sigma t). Each mode
+    /// has beta_n = Im[B_n e^(i sigma t)] with B_n = C_n (sigma_n^2 - sigma^2) /
+    /// (sigma_n^2 - sigma^2 + 2 i gamma_n sigma), C_n the undamped amplitude below.
     ///
     /// With O the centre of the still free surface and y_R = axis_height - h:
     ///   beta_n = C_n sin(sigma t),
@@ -40,7 +58,7 @@ impl RectangularTank {
     ///   F_x = -rho L h (x''_O + theta'' h/2) - rho sum I_n beta_n''
     ///   M_R = M_O + y_R F_x - y_R theta rho g L h,   x_O = y_R theta,
     /// with I_n = -2/k_n^2, J_n = -4 tanh(k_n h/2)/k_n^3 and J0 as in [`Self::j0`].
-    pub fn roll_moment_per_radian(&self, sigma: f64, axis_height: f64) -> f64 {
+    pub fn roll_moment_response(&self, sigma: f64, axis_height: f64) -> (f64, f64) {
         let (l, h, rho, g) = (self.breadth, self.depth, self.density, self.gravity);
         let y_r = axis_height - h;
         let s2 = sigma * sigma;
@@ -52,18 +70,105 @@ impl RectangularTank {
             - rho * x_dd * l * h * h / 2.0
             - rho * self.j0() * theta_dd;
         let mut f_x = -rho * l * h * (x_dd + theta_dd * h / 2.0);
+        // Quadrature parts (the rigid terms have none).
+        let (mut m_o_q, mut f_x_q) = (0.0, 0.0);
         for n in (1..=TERMS).step_by(2) {
             let k = n as f64 * PI / l;
             let sn2 = self.natural_frequency(n).powi(2);
-            let c = 4.0 * (k * h).tanh() / (k * l)
-                * (g - s2 * (y_r + 2.0 / k * (k * h / 2.0).tanh()))
-                / (sn2 - s2);
+            let drive =
+                4.0 * (k * h).tanh() / (k * l) * (g - s2 * (y_r + 2.0 / k * (k * h / 2.0).tanh()));
+            // B = drive / (sn2 - s2 + 2 i gamma sigma), split into real and imaginary.
+            let (re, im) = (sn2 - s2, 2.0 * self.damping(k) * sigma);
+            let norm = re * re + im * im;
+            let (b_re, b_im) = (drive * re / norm, -drive * im / norm);
             let (i_n, j_n) = (-2.0 / (k * k), -4.0 * (k * h / 2.0).tanh() / k.powi(3));
-            let beta_dd = -s2 * c;
-            m_o -= rho * (j_n * beta_dd + g * i_n * c);
-            f_x -= rho * i_n * beta_dd;
+            // beta'' = -sigma^2 beta for each part.
+            m_o -= rho * (j_n * -s2 + g * i_n) * b_re;
+            m_o_q -= rho * (j_n * -s2 + g * i_n) * b_im;
+            f_x -= rho * i_n * -s2 * b_re;
+            f_x_q -= rho * i_n * -s2 * b_im;
         }
-        m_o + y_r * f_x - y_r * theta * rho * g * l * h
+        (
+            m_o + y_r * f_x - y_r * theta * rho * g * l * h,
+            m_o_q + y_r * f_x_q,
+        )
+    }
+
+    /// The linear roll moment about the axis over time for a prescribed motion that
+    /// starts from rest, with the fluid at rest: each odd mode's equation
+    ///   beta_n'' + sigma_n^2 beta_n = (4 tanh(k_n h)/(k_n L)) [x_O'' + g theta + (2/k_n) tanh(k_n h/2) theta'']
+    /// is integrated from beta_n = beta_n' = 0 (the Duhamel response, by RK4 steps of at
+    /// most a fiftieth of the shortest period), and the moment assembled as in
+    /// [`Self::roll_moment_response`], with damping 2 gamma_n beta_n' when `viscosity`
+    /// > 0. `motion(t)` gives (theta, theta'', sway''), with
+    /// x_O = y_R theta + sway; `times` must increase. Heave is second order and left out.
+    pub fn roll_moment_history(
+        &self,
+        axis_height: f64,
+        motion: impl Fn(f64) -> (f64, f64, f64),
+        times: &[f64],
+    ) -> Vec<f64> {
+        const MODES: usize = 61;
+        let (l, h, rho, g) = (self.breadth, self.depth, self.density, self.gravity);
+        let y_r = axis_height - h;
+        // Per mode: sigma_n^2, gain, lever, I_n, J_n, 2 gamma_n.
+        let modes: Vec<(f64, f64, f64, f64, f64, f64)> = (1..=MODES)
+            .step_by(2)
+            .map(|n| {
+                let k = n as f64 * PI / l;
+                let gain = 4.0 * (k * h).tanh() / (k * l);
+                let lever = 2.0 / k * (k * h / 2.0).tanh();
+                let (i_n, j_n) = (-2.0 / (k * k), -4.0 * (k * h / 2.0).tanh() / k.powi(3));
+                let sn2 = self.natural_frequency(n).powi(2);
+                (sn2, gain, lever, i_n, j_n, 2.0 * self.damping(k))
+            })
+            .collect();
+        let max_step = 2.0 * PI / modes.last().map_or(1.0, |m| m.0.sqrt()) / 50.0;
+        let forcing = |t: f64, m: &(f64, f64, f64, f64, f64, f64)| {
+            let (theta, theta_dd, sway_dd) = motion(t);
+            m.1 * (y_r * theta_dd + sway_dd + g * theta + m.2 * theta_dd)
+        };
+        let j0 = self.j0();
+        let mut state = vec![(0.0f64, 0.0f64); modes.len()];
+        let mut t = times.first().copied().unwrap_or(0.0).min(0.0);
+        let mut out = Vec::with_capacity(times.len());
+        for &target in times {
+            let steps = ((target - t) / max_step).ceil().max(0.0) as usize;
+            let dt = if steps > 0 {
+                (target - t) / steps as f64
+            } else {
+                0.0
+            };
+            for _ in 0..steps {
+                for (m, (b, v)) in modes.iter().zip(state.iter_mut()) {
+                    // RK4 on (beta, beta').
+                    let acc = |tt: f64, bb: f64, vv: f64| forcing(tt, m) - m.0 * bb - m.5 * vv;
+                    let (k1b, k1v) = (*v, acc(t, *b, *v));
+                    let (b2, v2) = (*b + 0.5 * dt * k1b, *v + 0.5 * dt * k1v);
+                    let (k2b, k2v) = (v2, acc(t + 0.5 * dt, b2, v2));
+                    let (b3, v3) = (*b + 0.5 * dt * k2b, *v + 0.5 * dt * k2v);
+                    let (k3b, k3v) = (v3, acc(t + 0.5 * dt, b3, v3));
+                    let (b4, v4) = (*b + dt * k3b, *v + dt * k3v);
+                    let (k4b, k4v) = (v4, acc(t + dt, b4, v4));
+                    *b += dt / 6.0 * (k1b + 2.0 * k2b + 2.0 * k3b + k4b);
+                    *v += dt / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v);
+                }
+                t += dt;
+            }
+            let (theta, theta_dd, sway_dd) = motion(target);
+            let x_dd = y_r * theta_dd + sway_dd;
+            let mut m_o = -rho * g * theta * l * h * h / 2.0
+                - rho * x_dd * l * h * h / 2.0
+                - rho * j0 * theta_dd;
+            let mut f_x = -rho * l * h * (x_dd + theta_dd * h / 2.0);
+            for (m, (b, v)) in modes.iter().zip(&state) {
+                let b_dd = forcing(target, m) - m.0 * b - m.5 * v;
+                m_o -= rho * (m.4 * b_dd + g * m.3 * b);
+                f_x -= rho * m.3 * b_dd;
+            }
+            out.push(m_o + y_r * f_x - y_r * theta * rho * g * l * h);
+        }
+        out
     }
 
     /// J0 = h L^3/12 + (64/h) sum_{j odd} tanh(j pi L / (2h)) / (j pi / h)^5, the
@@ -127,6 +232,7 @@ mod tests {
             depth: 0.093,
             density: 1000.0,
             gravity: 9.81,
+            viscosity: 0.0,
         }
     }
 
@@ -197,6 +303,37 @@ mod tests {
             (exact - polygon).abs() < 1e-9 * polygon.abs(),
             "{exact} vs {polygon}"
         );
+    }
+
+    #[test]
+    fn slow_roll_history_follows_the_quasi_static_moment() {
+        // A roll ten times slower than the first mode, brought in over many periods:
+        // the response from rest tracks c(sigma) theta(t) (the free modes are barely
+        // excited by the smooth start).
+        let t = spheric_low();
+        let sigma = 0.1 * t.natural_frequency(1);
+        let ramp = 3.0 * 2.0 * PI / sigma;
+        let motion = |s: f64| {
+            let r = if s < ramp {
+                0.5 * (1.0 - (PI * s / ramp).cos())
+            } else {
+                1.0
+            };
+            // theta'' of the ramped roll is dominated by -sigma^2 theta once ramped.
+            let theta = 0.01 * r * (sigma * s).sin();
+            (theta, -sigma * sigma * theta, 0.0)
+        };
+        let times: Vec<f64> = (0..400).map(|i| ramp + i as f64 * 0.05).collect();
+        let history = t.roll_moment_history(0.0, motion, &times);
+        let c = t.roll_moment_per_radian(sigma, 0.0);
+        let scale = c * 0.01;
+        for (s, m) in times.iter().zip(&history) {
+            let expected = c * motion(*s).0;
+            assert!(
+                (m - expected).abs() < 0.01 * scale,
+                "t = {s}: {m} vs {expected}"
+            );
+        }
     }
 
     #[test]

@@ -250,6 +250,22 @@ pub struct PipelineEntry {
     resolved: String,
 }
 
+impl PipelineEntry {
+    /// A numeric parameter of the stage as resolved (defaults filled in), e.g.
+    /// `forces`' `alpha`.
+    pub fn number(&self, key: &str) -> Option<f64> {
+        let value: ron::Value = ron::from_str(&self.resolved).ok()?;
+        let ron::Value::Map(map) = value else {
+            return None;
+        };
+        let found = map.iter().find_map(|(k, v)| match (k, v) {
+            (ron::Value::String(k), ron::Value::Number(n)) if k == key => Some(n.into_f64()),
+            _ => None,
+        });
+        found
+    }
+}
+
 impl fmt::Debug for PipelineEntry {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}{}", camel_case(&self.name), self.resolved)
