@@ -99,9 +99,9 @@ impl RectangularTank {
     ///   beta_n'' + sigma_n^2 beta_n = (4 tanh(k_n h)/(k_n L)) [x_O'' + g theta + (2/k_n) tanh(k_n h/2) theta'']
     /// is integrated from beta_n = beta_n' = 0 (the Duhamel response, by RK4 steps of at
     /// most a fiftieth of the shortest period), and the moment assembled as in
-    /// [`Self::roll_moment_response`], with damping 2 gamma_n beta_n' when `viscosity`
-    /// > 0. `motion(t)` gives (theta, theta'', sway''), with
-    /// x_O = y_R theta + sway; `times` must increase. Heave is second order and left out.
+    /// [`Self::roll_moment_response`], with damping 2 gamma_n beta_n' for a positive
+    /// `viscosity`. `motion(t)` gives (theta, theta'', sway''), with x_O = y_R theta +
+    /// sway; `times` must increase. Heave is second order and left out.
     pub fn roll_moment_history(
         &self,
         axis_height: f64,
