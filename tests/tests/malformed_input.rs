@@ -436,6 +436,54 @@ fn cases() -> Vec<Case> {
             &["no fluid"],
         ),
         case(
+            "tilt out of range",
+            dam_value("tank", "(width: 3.22, height: 1.8, motion: (tilt: 95.0))"),
+            LineOf("tank:"),
+            Is("tilt"),
+            &["95", "accepted: degrees between -90 and 90"],
+        ),
+        case(
+            "roll period not positive",
+            dam_value(
+                "tank",
+                "(width: 3.22, height: 1.8, motion: (roll: (amplitude: 4.0, period: -1.0)))",
+            ),
+            LineOf("tank:"),
+            Is("period"),
+            &["-1", "accepted: a finite number > 0"],
+        ),
+        case(
+            "motion series file missing",
+            dam_value(
+                "tank",
+                "(width: 3.22, height: 1.8, motion: (series: \"no_such_roll.csv\"))",
+            ),
+            LineOf("tank:"),
+            Is("series"),
+            &["no_such_roll.csv", "cannot read motion series"],
+        ),
+        case(
+            "series and harmonics together",
+            dam_value(
+                "tank",
+                "(width: 3.22, height: 1.8, motion: (series: \"a.csv\", roll: (amplitude: 1.0, period: 1.0)))",
+            ),
+            LineOf("tank:"),
+            Is("series"),
+            &["either the series or the harmonics"],
+        ),
+        case(
+            "sweep without roll",
+            dam_value("pipeline", "[]").replacen(
+                "pipeline: [],",
+                "sweep: (omega: [2.0]),\n    pipeline: [Integrate()],",
+                1,
+            ),
+            LineOf("sweep:"),
+            Is("sweep"),
+            &["give the tank a `motion: (roll:"],
+        ),
+        case(
             "empty file",
             String::new(),
             LastLine,

@@ -1,5 +1,6 @@
-//! A run's results do not depend on the number of worker threads: a small dam break on
-//! one thread and on two writes byte-identical probes.csv and energy.csv.
+//! A run's results do not depend on the number of worker threads: a small dam break
+//! and a small rolling tank, each on one thread and on two, write byte-identical
+//! probes.csv and energy.csv.
 
 use sph_core::overrides::Override;
 use sph_core::runner::{run, RunOptions};
@@ -8,24 +9,26 @@ use sph_tests::support::temp_out;
 use std::path::PathBuf;
 
 const DAM: &str = include_str!("../../scenarios/dam_break.ron");
+const SLOSHING: &str = include_str!("../../scenarios/sloshing.ron");
 
-/// Runs the small dam break on `threads` threads; returns the output folder.
-fn run_on(threads: usize) -> PathBuf {
-    let overrides: Vec<Override> = [
-        "resolution=ParticlesAcross(40)",
-        "end_time=0.3",
-        // Keep output cheap: one frame, no pictures or plots.
-        "pipeline.vtk_frames.interval=1.0",
-        "pipeline.snapshots.times=[]",
-        "pipeline.probe.plots=false",
-        "pipeline.energy.plots=false",
-    ]
-    .iter()
-    .map(|o| o.parse().unwrap_or_else(|e| panic!("{e}")))
-    .collect();
+/// Keep output cheap: one frame, no pictures or plots.
+const QUIET: [&str; 4] = [
+    "pipeline.vtk_frames.interval=1.0",
+    "pipeline.snapshots.times=[]",
+    "pipeline.probe.plots=false",
+    "pipeline.energy.plots=false",
+];
+
+/// Runs a small version of `text` on `threads` threads; returns the output folder.
+fn run_on(text: &str, file: &str, coarse: &[&str], threads: usize) -> PathBuf {
+    let overrides: Vec<Override> = coarse
+        .iter()
+        .chain(&QUIET)
+        .map(|o| o.parse().unwrap_or_else(|e| panic!("{e}")))
+        .collect();
     let registry = sph_stages::standard_registry();
-    let scenario = Scenario::from_str(DAM, "scenarios/dam_break.ron", &overrides, &registry)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let scenario =
+        Scenario::from_str(text, file, &overrides, &registry).unwrap_or_else(|e| panic!("{e}"));
     let out = temp_out(&format!("threads{threads}"));
     let opts = RunOptions {
         out_dir: out.clone(),
@@ -41,9 +44,28 @@ fn run_on(threads: usize) -> PathBuf {
 }
 
 #[test]
-fn results_do_not_depend_on_thread_count() {
-    let one = run_on(1);
-    let two = run_on(2);
+fn dam_break_does_not_depend_on_thread_count() {
+    let coarse = ["resolution=ParticlesAcross(40)", "end_time=0.3"];
+    let file = "scenarios/dam_break.ron";
+    compare(run_on(DAM, file, &coarse, 1), run_on(DAM, file, &coarse, 2));
+}
+
+#[test]
+fn rolling_tank_does_not_depend_on_thread_count() {
+    // Moving walls, tank-frame sensors and the roll moment sum.
+    let coarse = [
+        "resolution=ParticlesAcross(60)",
+        "end_time=0.4",
+        "tank.motion.ramp=0.1",
+    ];
+    let file = "scenarios/sloshing.ron";
+    compare(
+        run_on(SLOSHING, file, &coarse, 1),
+        run_on(SLOSHING, file, &coarse, 2),
+    );
+}
+
+fn compare(one: PathBuf, two: PathBuf) {
     for file in ["probes.csv", "energy.csv"] {
         let read = |dir: &PathBuf| {
             std::fs::read_to_string(dir.join(file))

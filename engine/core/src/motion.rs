@@ -46,7 +46,8 @@ pub struct MotionSpec {
     /// A CSV time series instead of the harmonics: columns time [s], angle [deg] and
     /// optionally x, y [m] (pivot displacement); `#` comments and one header line
     /// allowed; relative to the scenario file. Interpolated by cubic Hermite splines;
-    /// held at its end values outside its time range. No ramp applies.
+    /// held at its end values outside its time range. No ramp applies: the liquid
+    /// starts moving with the tank at the series' first velocity.
     pub series: Option<String>,
 }
 
@@ -197,7 +198,7 @@ impl MotionSeries {
     fn at(&self, k: usize, s: f64) -> [f64; 3] {
         let (t, y) = (&self.t, &self.values[k]);
         let n = t.len();
-        if s <= t[0] {
+        if s < t[0] {
             return [y[0], 0.0, 0.0];
         }
         if s >= t[n - 1] {
