@@ -13,6 +13,7 @@ pub mod eos;
 pub mod forces;
 pub mod ghost_walls;
 pub mod integrate;
+pub mod mls;
 pub mod neighbour_grid;
 pub mod probe;
 pub mod reinitialise;

@@ -1,11 +1,14 @@
-//! Density re-initialisation by the Shepard filter (Colagrossi & Landrini 2003;
-//! physics.md, "Density re-initialisation"):
+//! Density re-initialisation (Colagrossi & Landrini 2003; physics.md, "Density
+//! re-initialisation"), by the Shepard filter
 //!   rho_i = sum_j m_j W_ij / sum_j (m_j/rho_j) W_ij   (j over fluid, ghosts and i itself)
+//! or the first-order MLS filter ([`crate::mls`]), which keeps a linear (hydrostatic)
+//! density field and so does not lift a free surface when run often.
 //! Run it every N steps with the stage's `every: N`; leave the stage out for "never".
 
 use crate::continuity::require_neighbours;
 use crate::ghost_walls::refresh_ghost_density;
 use crate::integrate::HalfDensity;
+use crate::mls::MlsSums;
 use crate::neighbour_grid::Neighbours;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -16,17 +19,31 @@ use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::world::Particles;
 use sph_core::{with_kernel, StageRegistry};
 
+/// The density filter.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Filter {
+    /// Zeroth order: sum m W / sum V W.
+    #[default]
+    Shepard,
+    /// First-order moving least squares (exact for linear density fields).
+    Mls,
+}
+
 /// How often is the runner's `every: N` (default 1); the studied values are 1, 5, 20.
 #[derive(Debug, Default, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Params {}
+#[serde(default, deny_unknown_fields)]
+pub struct Params {
+    /// Default Shepard (the paper's filter).
+    pub filter: Filter,
+}
 
 pub fn register(registry: &mut StageRegistry) {
     registry.register(
         "reinitialise",
-        "Shepard density re-initialisation (use every: N)",
-        |_: Params| {
+        "Shepard or MLS density re-initialisation (use every: N)",
+        |p: Params| {
             Ok(Reinitialise {
+                filter: p.filter,
                 filtered: Vec::new(),
             })
         },
@@ -34,6 +51,7 @@ pub fn register(registry: &mut StageRegistry) {
 }
 
 pub struct Reinitialise {
+    filter: Filter,
     filtered: Vec<f64>,
 }
 
@@ -61,6 +79,7 @@ impl Stage for Reinitialise {
             );
             let (x, rho, m) = (x.view(), rho.view(), m.view());
             let c = &sim.constants;
+            let filter = self.filter;
             self.filtered.resize(x.fluid.len(), 0.0);
             with_kernel!(c.kernel, c.h, |k| {
                 let w0 = k.w(0.0);
@@ -69,15 +88,16 @@ impl Stage for Reinitialise {
                     .enumerate()
                     .for_each(|(i, out)| {
                         let xi = x.fluid[i].0;
-                        let (mi, rhoi) = (m.fluid[i].0, rho.fluid[i].0);
-                        let (mut num, mut den) = (mi * w0, mi / rhoi * w0);
+                        let mut sums = MlsSums::default();
+                        sums.add(glam::DVec2::ZERO, w0, m.fluid[i].0, rho.fluid[i].0);
                         for &j in nb.of(i) {
-                            let w = k.w((xi - x.get(j).0).length());
-                            let mj = m.get(j).0;
-                            num += mj * w;
-                            den += mj / rho.get(j).0 * w;
+                            let d = xi - x.get(j).0;
+                            sums.add(d, k.w(d.length()), m.get(j).0, rho.get(j).0);
                         }
-                        *out = num / den;
+                        *out = match filter {
+                            Filter::Shepard => sums.shepard(),
+                            Filter::Mls => sums.mls(),
+                        };
                     });
             });
         }

@@ -3,19 +3,9 @@
 
 use sph_core::runner::{run, RunOptions};
 use sph_core::Scenario;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 const FILE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/scenarios/plugin.ron");
-
-/// A fresh, empty output folder under the system temp folder.
-fn temp_out(tag: &str) -> PathBuf {
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos());
-    let dir = std::env::temp_dir().join(format!("sph-tests-{tag}-{}-{nanos}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
-}
 
 #[test]
 fn plugin_stage_runs_and_writes_its_series() {
@@ -29,7 +19,7 @@ fn plugin_stage_runs_and_writes_its_series() {
     let (gx, gy) = scenario.spec.fluid.gravity;
     let ritter = 2.0 * ((gx * gx + gy * gy).sqrt() * scenario.fluid_height()).sqrt();
     let bound = ritter.min(1.0);
-    let out = temp_out("plugin");
+    let out = sph_tests::support::temp_out("plugin");
     let opts = RunOptions {
         out_dir: out.clone(),
         threads: Some(2),

@@ -1,0 +1,120 @@
+//! Colagrossi & Landrini's (2003) first-order moving-least-squares density filter
+//! (physics.md, "Density re-initialisation", the more accurate alternative to Shepard):
+//!
+//!   rho_i = sum_j m_j W^MLS_ij,   W^MLS_ij = (b_0 + b_1 (x_i - x_j) + b_2 (y_i - y_j)) W_ij,
+//!   (b_0, b_1, b_2) = A^-1 (1, 0, 0),   A = sum_j W_ij V_j [1 d^T; d d d^T],  d = x_i - x_j,
+//!
+//! with V_j = m_j / rho_j and j over the neighbours and i itself. It reproduces a linear
+//! density field exactly, so unlike the Shepard filter it does not raise the density of
+//! free-surface particles towards the denser water below them (a Shepard filter every
+//! step lifts a still free surface; see docs/validation.md). Where the neighbourhood is
+//! too one-sided or too sparse for A to be well conditioned (lone spray particles), the
+//! Shepard value is used instead.
+
+use glam::DVec2;
+
+/// Smallest accepted det(A) / (A_00 A_11 A_22): below it A is near singular.
+const MIN_CONDITION: f64 = 1e-3;
+
+/// Running sums for one particle's filtered density.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct MlsSums {
+    /// Upper triangle of A: a00, a01, a02, a11, a12, a22.
+    a: [f64; 6],
+    /// Shepard sums: sum m W, sum V W.
+    num: f64,
+    den: f64,
+    /// (d, m W) of each term, needed after A is known: kept as the moments
+    /// sum m W, sum m W d.
+    m0: f64,
+    m1: DVec2,
+}
+
+impl MlsSums {
+    /// Adds neighbour j (or i itself with d = 0): d = x_i - x_j, kernel value w.
+    #[inline(always)]
+    pub fn add(&mut self, d: DVec2, w: f64, m: f64, rho: f64) {
+        let vw = m / rho * w;
+        self.a[0] += vw;
+        self.a[1] += vw * d.x;
+        self.a[2] += vw * d.y;
+        self.a[3] += vw * d.x * d.x;
+        self.a[4] += vw * d.x * d.y;
+        self.a[5] += vw * d.y * d.y;
+        self.num += m * w;
+        self.den += vw;
+        self.m0 += m * w;
+        self.m1 += m * w * d;
+    }
+
+    /// The Shepard-filtered density sum m W / sum V W.
+    pub fn shepard(&self) -> f64 {
+        self.num / self.den
+    }
+
+    /// The MLS density, or the Shepard one where A is ill conditioned.
+    pub fn mls(&self) -> f64 {
+        let [a00, a01, a02, a11, a12, a22] = self.a;
+        // First column of A^-1 by cofactors (A symmetric).
+        let c00 = a11 * a22 - a12 * a12;
+        let c01 = -(a01 * a22 - a12 * a02);
+        let c02 = a01 * a12 - a11 * a02;
+        let det = a00 * c00 + a01 * c01 + a02 * c02;
+        let scale = a00 * a11 * a22;
+        if !(scale > 0.0) || det / scale < MIN_CONDITION {
+            return self.shepard();
+        }
+        let b = DVec2::new(c01, c02) / det;
+        // sum_j m_j (b0 + b . d) W = b0 sum m W + b . sum m W d
+        c00 / det * self.m0 + b.dot(self.m1)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use sph_core::kernel::{Kernel, Wendland};
+
+    /// A lattice patch around the origin with a linear density field, cut at y = cut
+    /// (a free surface through or above the particle).
+    fn filtered(cut: f64) -> (f64, f64, f64) {
+        let (ds, h) = (0.01, 0.013);
+        let k = Wendland::new(h);
+        let rho = |p: DVec2| 1000.0 - 3000.0 * p.y + 500.0 * p.x; // denser below
+        let xi = DVec2::ZERO;
+        let mut s = MlsSums::default();
+        for i in -4..=4 {
+            for j in -4..=4 {
+                let p = DVec2::new(i as f64, j as f64) * ds;
+                if p.y > cut + 1e-12 {
+                    continue;
+                }
+                let r = rho(p);
+                s.add(xi - p, k.w(p.length()), r * ds * ds, r);
+            }
+        }
+        (s.mls(), s.shepard(), rho(xi))
+    }
+
+    #[test]
+    fn reproduces_a_linear_density_inside_and_at_a_free_surface() {
+        for cut in [1.0, 0.0] {
+            let (mls, shepard, exact) = filtered(cut);
+            assert!(
+                (mls - exact).abs() < 1e-9 * exact,
+                "cut {cut}: {mls} vs {exact}"
+            );
+            if cut == 0.0 {
+                // Shepard averages the denser water below: biased upward.
+                assert!(shepard > exact + 1.0, "{shepard} vs {exact}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_lone_particle_keeps_its_shepard_value() {
+        let mut s = MlsSums::default();
+        s.add(DVec2::ZERO, 1.0, 0.1, 990.0);
+        assert_eq!(s.mls(), 990.0);
+    }
+}
