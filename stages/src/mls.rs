@@ -61,7 +61,7 @@ impl MlsSums {
         let c02 = a01 * a12 - a11 * a02;
         let det = a00 * c00 + a01 * c01 + a02 * c02;
         let scale = a00 * a11 * a22;
-        if !(scale > 0.0) || det / scale < MIN_CONDITION {
+        if scale.is_nan() || scale <= 0.0 || det / scale < MIN_CONDITION {
             return self.shepard();
         }
         let b = DVec2::new(c01, c02) / det;
