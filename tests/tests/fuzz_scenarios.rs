@@ -1,0 +1,205 @@
+//! Mutated scenario files never panic the loader: thousands of random edits of the
+//! shipped scenarios (deleted, inserted and swapped characters and lines, numbers
+//! replaced by edge values, truncation) each load or fail with an error that names a
+//! place (line and column) or a field. The default count keeps this test to a few
+//! seconds; `SPH_FUZZ_CASES=200000 cargo test --release -p sph-tests --test
+//! fuzz_scenarios -- --nocapture` runs a longer campaign.
+
+use sph_core::Scenario;
+use std::panic::{catch_unwind, AssertUnwindSafe};
+
+const SHIPPED: [(&str, &str); 5] = [
+    (
+        "scenarios/dam_break.ron",
+        include_str!("../../scenarios/dam_break.ron"),
+    ),
+    (
+        "scenarios/hydrostatic.ron",
+        include_str!("../../scenarios/hydrostatic.ron"),
+    ),
+    (
+        "scenarios/sloshing.ron",
+        include_str!("../../scenarios/sloshing.ron"),
+    ),
+    (
+        "scenarios/sloshing_high.ron",
+        include_str!("../../scenarios/sloshing_high.ron"),
+    ),
+    (
+        "scenarios/anti_roll_tank.ron",
+        include_str!("../../scenarios/anti_roll_tank.ron"),
+    ),
+];
+
+/// A small deterministic generator (SplitMix64): the same cases on every run.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n.max(1) as u64) as usize
+    }
+}
+
+const EDGE_NUMBERS: [&str; 14] = [
+    "0",
+    "-1",
+    "0.0",
+    "-0.0",
+    "1e308",
+    "-1e308",
+    "1e-320",
+    "NaN",
+    "inf",
+    "-inf",
+    "18446744073709551616",
+    "99999999999",
+    "1e9",
+    "3",
+];
+const NOISE: &[u8] = b"()[]{},:;\"'/*\\ \n\tx_0.-+eE9";
+
+/// One random edit of `text`, on character boundaries.
+fn mutate(text: &str, rng: &mut Rng) -> String {
+    let chars: Vec<char> = text.chars().collect();
+    if chars.is_empty() {
+        return String::from("(");
+    }
+    let at = rng.below(chars.len() + 1);
+    let s: String;
+    match rng.below(8) {
+        0 => {
+            // Delete a run of characters.
+            let len = 1 + rng.below(8);
+            let end = (at + len).min(chars.len());
+            s = chars[..at].iter().chain(&chars[end..]).collect();
+        }
+        1 => {
+            let c = NOISE[rng.below(NOISE.len())] as char;
+            s = chars[..at]
+                .iter()
+                .chain(std::iter::once(&c))
+                .chain(&chars[at..])
+                .collect();
+        }
+        2 => {
+            // Replace a number with an edge value.
+            let numbers: Vec<usize> = (1..chars.len())
+                .filter(|&i| {
+                    chars[i].is_ascii_digit()
+                        && !chars[i - 1].is_ascii_alphanumeric()
+                        && chars[i - 1] != '.'
+                })
+                .collect();
+            let Some(&start) = numbers.get(rng.below(numbers.len())) else {
+                return text.to_string();
+            };
+            let end = (start..chars.len())
+                .find(|&i| !(chars[i].is_ascii_digit() || chars[i] == '.' || chars[i] == 'e'))
+                .unwrap_or(chars.len());
+            let edge = EDGE_NUMBERS[rng.below(EDGE_NUMBERS.len())];
+            s = chars[..start].iter().collect::<String>()
+                + edge
+                + &chars[end..].iter().collect::<String>();
+        }
+        3 => s = chars[..at].iter().collect(),
+        4 | 5 => {
+            // Delete or duplicate a line.
+            let lines: Vec<&str> = text.lines().collect();
+            if lines.is_empty() {
+                return text.to_string();
+            }
+            let k = rng.below(lines.len());
+            let mut out: Vec<&str> = lines.clone();
+            if rng.below(2) == 0 {
+                out.remove(k);
+            } else {
+                out.insert(k, lines[k]);
+            }
+            s = out.join("\n");
+        }
+        6 => {
+            // Swap two characters.
+            let mut c = chars.clone();
+            let b = rng.below(c.len());
+            if at < c.len() && b < c.len() {
+                c.swap(at, b);
+            }
+            s = c.into_iter().collect();
+        }
+        _ => {
+            // Replace an identifier-like word with another word from the file.
+            let words: Vec<&str> = text
+                .split(|c: char| !(c.is_alphanumeric() || c == '_'))
+                .filter(|w| w.len() > 2)
+                .collect();
+            if words.is_empty() {
+                return text.to_string();
+            }
+            let (a, b) = (words[rng.below(words.len())], words[rng.below(words.len())]);
+            s = text.replacen(a, b, 1);
+        }
+    }
+    s
+}
+
+#[test]
+fn mutated_scenarios_give_located_errors_never_panics() {
+    let cases: usize = std::env::var("SPH_FUZZ_CASES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(20_000);
+    let registry = sph_stages::standard_registry();
+    let mut rng = Rng(0x5EED);
+    let (mut loaded, mut refused) = (0usize, 0usize);
+    let start = std::time::Instant::now();
+    // Silence the default panic message; a panic is reported below with its input.
+    std::panic::set_hook(Box::new(|_| {}));
+    let mut problem = None;
+    for n in 0..cases {
+        let (file, base) = SHIPPED[n % SHIPPED.len()];
+        let mut text = base.to_string();
+        for _ in 0..1 + rng.below(3) {
+            text = mutate(&text, &mut rng);
+        }
+        let result = catch_unwind(AssertUnwindSafe(|| {
+            Scenario::from_str(&text, file, &[], &registry)
+        }));
+        match result {
+            Err(_) => {
+                problem = Some(format!(
+                    "case {n}: the loader panicked on this input:\n{text}"
+                ))
+            }
+            Ok(Ok(_)) => loaded += 1,
+            Ok(Err(e)) => {
+                refused += 1;
+                if !(e.line > 0 || e.field.is_some()) || !e.to_string().starts_with(file) {
+                    problem = Some(format!(
+                        "case {n}: error without a place or field: {e}\ninput:\n{text}"
+                    ));
+                }
+            }
+        }
+        if problem.is_some() {
+            break;
+        }
+    }
+    let _ = std::panic::take_hook();
+    if let Some(p) = problem {
+        panic!("{p}");
+    }
+    eprintln!(
+        "{cases} mutated scenarios in {:.1} s: {loaded} loaded, {refused} refused with a located error",
+        start.elapsed().as_secs_f64()
+    );
+    assert!(
+        refused > cases / 4,
+        "too few mutations were errors: {refused}"
+    );
+}
