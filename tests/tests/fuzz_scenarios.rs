@@ -71,21 +71,20 @@ fn mutate(text: &str, rng: &mut Rng) -> String {
         return String::from("(");
     }
     let at = rng.below(chars.len() + 1);
-    let s: String;
     match rng.below(8) {
         0 => {
             // Delete a run of characters.
             let len = 1 + rng.below(8);
             let end = (at + len).min(chars.len());
-            s = chars[..at].iter().chain(&chars[end..]).collect();
+            chars[..at].iter().chain(&chars[end..]).collect()
         }
         1 => {
             let c = NOISE[rng.below(NOISE.len())] as char;
-            s = chars[..at]
+            chars[..at]
                 .iter()
                 .chain(std::iter::once(&c))
                 .chain(&chars[at..])
-                .collect();
+                .collect()
         }
         2 => {
             // Replace a number with an edge value.
@@ -103,11 +102,11 @@ fn mutate(text: &str, rng: &mut Rng) -> String {
                 .find(|&i| !(chars[i].is_ascii_digit() || chars[i] == '.' || chars[i] == 'e'))
                 .unwrap_or(chars.len());
             let edge = EDGE_NUMBERS[rng.below(EDGE_NUMBERS.len())];
-            s = chars[..start].iter().collect::<String>()
+            chars[..start].iter().collect::<String>()
                 + edge
-                + &chars[end..].iter().collect::<String>();
+                + &chars[end..].iter().collect::<String>()
         }
-        3 => s = chars[..at].iter().collect(),
+        3 => chars[..at].iter().collect(),
         4 | 5 => {
             // Delete or duplicate a line.
             let lines: Vec<&str> = text.lines().collect();
@@ -121,7 +120,7 @@ fn mutate(text: &str, rng: &mut Rng) -> String {
             } else {
                 out.insert(k, lines[k]);
             }
-            s = out.join("\n");
+            out.join("\n")
         }
         6 => {
             // Swap two characters.
@@ -130,7 +129,7 @@ fn mutate(text: &str, rng: &mut Rng) -> String {
             if at < c.len() && b < c.len() {
                 c.swap(at, b);
             }
-            s = c.into_iter().collect();
+            c.into_iter().collect()
         }
         _ => {
             // Replace an identifier-like word with another word from the file.
@@ -142,10 +141,9 @@ fn mutate(text: &str, rng: &mut Rng) -> String {
                 return text.to_string();
             }
             let (a, b) = (words[rng.below(words.len())], words[rng.below(words.len())]);
-            s = text.replacen(a, b, 1);
+            text.replacen(a, b, 1)
         }
     }
-    s
 }
 
 #[test]
