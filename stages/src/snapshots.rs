@@ -14,7 +14,8 @@ use sph_core::StageRegistry;
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Params {
-    /// Simulated times [s] to draw; each is drawn at the first step at or after it.
+    /// Simulated times [s] to draw; each is drawn at the first step at or after it,
+    /// named by the requested time (the title gives the actual time).
     pub times: Vec<f64>,
     /// Colour scale [Pa]; default (0, rho_0 |g| H) with H the tallest initial fluid block.
     pub pressure_range: Option<(f64, f64)>,
@@ -107,9 +108,7 @@ impl Stage for Snapshots {
             .params
             .pressure_range
             .unwrap_or((0.0, c.eos.rho0 * c.gravity.length() * c.fluid_height));
-        let path = sim
-            .out_dir
-            .join(format!("snapshot_t{:.3}.png", sim.clock.time));
+        let path = sim.out_dir.join(format!("snapshot_t{t:.3}.png"));
         let title = format!("{}  t = {:.3} s", sim.name, sim.clock.time);
         let snapshot = Snapshot {
             positions: &positions,

@@ -436,6 +436,13 @@ fn cases() -> Vec<Case> {
             &["no fluid"],
         ),
         case(
+            "integrate not every step",
+            dam_stage("Integrate", "Integrate(every: 2, courant: 0.25)"),
+            LineOf("Integrate(every: 2"),
+            Is("every"),
+            &["Integrate runs every step"],
+        ),
+        case(
             "tilt out of range",
             dam_value("tank", "(width: 3.22, height: 1.8, motion: (tilt: 95.0))"),
             LineOf("tank:"),

@@ -149,6 +149,8 @@ fn run_in_pool(mut scenario: Scenario, opts: &RunOptions) -> Result<(Summary, Si
         message: e.to_string(),
     };
     std::fs::create_dir_all(out).map_err(io_err)?;
+    // A stale frame from an earlier failed run in this folder would mislead.
+    let _ = std::fs::remove_file(out.join("unstable.vtp"));
     crate::output::atomic::write_atomic(
         &out.join("scenario.resolved.ron"),
         scenario.resolved_ron().as_bytes(),

@@ -927,6 +927,26 @@ fn validate(spec: ScenarioSpec, at: &Locator, source: PathBuf) -> Result<Scenari
             ));
         }
     }
+    if let Some((k, e)) = scenario
+        .spec
+        .pipeline
+        .iter()
+        .enumerate()
+        .find(|(_, e)| e.name == "integrate" && e.every != 1)
+    {
+        let place = at
+            .doc
+            .element(&["pipeline"], k, "every")
+            .or_else(|| at.doc.key(&["pipeline"]));
+        return Err(at.error(
+            "every",
+            place,
+            format!(
+                "Integrate(every: {}) would leave the clock standing on the other steps; accepted: Integrate runs every step (every: 1)",
+                e.every
+            ),
+        ));
+    }
     if scenario.spec.pipeline.is_empty() {
         return Err(at.field(
             "pipeline",
