@@ -1,11 +1,14 @@
 //! Particle frames for ParaView: `frames/frame_NNNNN.vtp` every `interval` seconds of
-//! simulated time, indexed by `frames.pvd` (open that file in ParaView).
+//! simulated time, indexed by `frames.pvd` (open that file in ParaView). A moving tank
+//! also gets its walls at the same times, `frames/walls_NNNNN.vtp` in `walls.pvd`
+//! (open both; ParaView plays them together).
 
 use serde::{Deserialize, Serialize};
 use sph_core::frame::write_fluid_frame;
-use sph_core::output::vtk::PvdIndex;
+use sph_core::output::vtk::{write_segments_vtp, PvdIndex};
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
+use sph_core::walls::WallSet;
 use sph_core::StageRegistry;
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -37,6 +40,7 @@ pub fn register(registry: &mut StageRegistry) {
                 next: 0.0,
                 written: 0,
                 index: None,
+                walls: None,
             })
         },
     );
@@ -47,6 +51,8 @@ pub struct VtkFrames {
     next: f64,
     written: usize,
     index: Option<PvdIndex>,
+    /// A moving tank's walls and their index.
+    walls: Option<(WallSet, PvdIndex)>,
 }
 
 impl Stage for VtkFrames {
@@ -63,6 +69,10 @@ impl Stage for VtkFrames {
             )
         })?;
         self.index = Some(PvdIndex::new(sim.out_dir.join("frames.pvd")));
+        let walls = WallSet::from_world(&sim.world);
+        if walls.moving() {
+            self.walls = Some((walls, PvdIndex::new(sim.out_dir.join("walls.pvd"))));
+        }
         Ok(())
     }
 
@@ -77,12 +87,25 @@ impl Stage for VtkFrames {
             + self.params.interval;
         let name = format!("frames/frame_{:05}.vtp", self.written);
         write_fluid_frame(sim, &sim.out_dir.join(&name))?;
-        self.written += 1;
         if let Some(index) = &mut self.index {
             index
                 .push(sim.clock.time, &name)
                 .map_err(|e| StepError::output(&sim.out_dir.join("frames.pvd"), e))?;
         }
+        if let Some((walls, index)) = &mut self.walls {
+            let name = format!("frames/walls_{:05}.vtp", self.written);
+            let path = sim.out_dir.join(&name);
+            let segments: Vec<_> = walls
+                .at(sim.clock.time)
+                .iter()
+                .map(|w| (w.a, w.b))
+                .collect();
+            write_segments_vtp(&path, &segments).map_err(|e| StepError::output(&path, e))?;
+            index
+                .push(sim.clock.time, &name)
+                .map_err(|e| StepError::output(index.path(), e))?;
+        }
+        self.written += 1;
         Ok(())
     }
 }

@@ -209,6 +209,44 @@ fn xml_escape(s: &str) -> String {
     out
 }
 
+/// Writes straight segments (walls) as a VTK PolyData file of lines, atomically.
+pub fn write_segments_vtp(path: &Path, segments: &[(glam::DVec2, glam::DVec2)]) -> io::Result<()> {
+    let n = segments.len();
+    let mut s = String::with_capacity(400 + 120 * n);
+    s.push_str("<?xml version=\"1.0\"?>\n<VTKFile type=\"PolyData\" version=\"1.0\" byte_order=\"LittleEndian\">\n  <PolyData>\n");
+    let _ = writeln!(
+        s,
+        "    <Piece NumberOfPoints=\"{}\" NumberOfVerts=\"0\" NumberOfLines=\"{n}\" NumberOfStrips=\"0\" NumberOfPolys=\"0\">",
+        2 * n
+    );
+    s.push_str("      <Points>\n        <DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">\n");
+    for (a, b) in segments {
+        let _ = writeln!(s, "          {} {} 0 {} {} 0", a.x, a.y, b.x, b.y);
+    }
+    s.push_str("        </DataArray>\n      </Points>\n      <Lines>\n");
+    s.push_str(
+        "        <DataArray type=\"Int32\" Name=\"connectivity\" format=\"ascii\">\n          ",
+    );
+    for k in 0..2 * n {
+        let _ = write!(s, "{k} ");
+    }
+    s.push_str("\n        </DataArray>\n        <DataArray type=\"Int32\" Name=\"offsets\" format=\"ascii\">\n          ");
+    for k in 1..=n {
+        let _ = write!(s, "{} ", 2 * k);
+    }
+    s.push_str("\n        </DataArray>\n      </Lines>\n    </Piece>\n  </PolyData>\n</VTKFile>\n");
+    if segments
+        .iter()
+        .any(|(a, b)| !a.is_finite() || !b.is_finite())
+    {
+        return Err(invalid(format!(
+            "non-finite wall end in {}",
+            path.display()
+        )));
+    }
+    write_atomic(path, s.as_bytes())
+}
+
 /// A ParaView `.pvd` collection listing frames by time; rewritten atomically on every push.
 pub struct PvdIndex {
     path: PathBuf,
@@ -270,6 +308,24 @@ mod tests {
         let _ = fs::remove_dir_all(&dir);
         fs::create_dir_all(&dir).unwrap();
         dir
+    }
+
+    #[test]
+    fn segments_file_lists_two_points_per_line() {
+        use glam::DVec2;
+        let dir = test_dir("segments");
+        let path = dir.join("walls.vtp");
+        let segs = [
+            (DVec2::new(0.0, 1.0), DVec2::new(0.0, 0.0)),
+            (DVec2::new(0.0, 0.0), DVec2::new(2.0, 0.5)),
+        ];
+        write_segments_vtp(&path, &segs).unwrap();
+        let text = fs::read_to_string(&path).unwrap();
+        assert!(text.contains("NumberOfPoints=\"4\""));
+        assert!(text.contains("NumberOfLines=\"2\""));
+        assert!(text.contains("0 0 0 2 0.5 0"));
+        assert!(text.contains("2 4 \n"));
+        assert!(write_segments_vtp(&path, &[(DVec2::NAN, DVec2::ZERO)]).is_err());
     }
 
     fn b64_decode(s: &str) -> Vec<u8> {
