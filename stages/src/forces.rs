@@ -70,7 +70,7 @@ pub fn register(registry: &mut StageRegistry) {
             }
             Ok(Forces {
                 params: p,
-                sound: Vec::new(),
+                aux: Vec::new(),
             })
         },
     );
@@ -78,9 +78,18 @@ pub fn register(registry: &mut StageRegistry) {
 
 pub struct Forces {
     params: Params,
-    /// Per-particle sound speed c(rho) in the joint numbering, refreshed each step so the
-    /// pair loop needs no powf.
-    sound: Vec<f64>,
+    /// Per-particle p/rho^2 and sound speed c(rho) in the joint numbering, refreshed
+    /// each step so the pair loop needs no powf and no division for them.
+    aux: Vec<Aux>,
+}
+
+/// What the pair loop reads of particle j besides the columns.
+#[derive(Clone, Copy, Default)]
+struct Aux {
+    /// p / rho^2 [m^3/(kg s^2) = Pa m^6/kg^2].
+    p_rho2: f64,
+    /// Sound speed c(rho) [m/s].
+    c: f64,
 }
 
 /// Work dissipated by the artificial viscosity: the forces stage stores its rate here
@@ -117,10 +126,8 @@ struct Fields<'a> {
     x: Joined<'a, Position>,
     v: Joined<'a, Velocity>,
     rho: Joined<'a, Density>,
-    p: Joined<'a, Pressure>,
     m: Joined<'a, Mass>,
-    /// Sound speed c(rho).
-    c: Joined<'a, f64>,
+    aux: Joined<'a, Aux>,
 }
 
 impl Forces {
@@ -141,30 +148,34 @@ impl Forces {
         let (p, m) = (particles.joined::<Pressure>()?, particles.joined::<Mass>()?);
         let c = &sim.constants;
         let (eos, g, h, ds) = (c.eos, c.gravity, c.h, c.spacing);
-        let rho_all = rho.view();
-        self.sound.resize(rho_all.len(), 0.0);
-        self.sound
-            .par_iter_mut()
-            .enumerate()
-            .for_each(|(j, s)| *s = eos.sound_speed(rho_all.get(j as u32).0));
-        let sound = Joined::new(
-            &self.sound[..rho_all.fluid.len()],
-            &self.sound[rho_all.fluid.len()..],
-        );
+        let (rho_all, p_all) = (rho.view(), p.view());
+        self.aux.resize(rho_all.len(), Aux::default());
+        self.aux.par_iter_mut().enumerate().for_each(|(j, a)| {
+            let (rho, p) = (rho_all.get(j as u32).0, p_all.get(j as u32).0);
+            *a = Aux {
+                p_rho2: p / (rho * rho),
+                c: eos.sound_speed(rho),
+            };
+        });
+        let n_fluid = rho_all.fluid.len();
         let f = Fields {
             x: x.view(),
             v: v.view(),
-            rho: rho.view(),
-            p: p.view(),
+            rho: rho_all,
             m: m.view(),
-            c: sound,
+            aux: Joined::new(&self.aux[..n_fluid], &self.aux[n_fluid..]),
         };
         let mut acc = particles.fluid_mut::<Acceleration>()?;
         let mut dissipation = vec![0.0; if want_power { acc.len() } else { 0 }];
         with_kernel!(c.kernel, h, |k| {
-            let w_ds = k.w(ds);
-            let prm = &self.params;
-            let pair = |i: usize| sum_over_neighbours(prm, &k, &f, nb.of(i), i, h, w_ds);
+            let prm = Pair::new(&self.params, k.w(ds), h);
+            let pair = |i: usize| {
+                if self.params.artificial_pressure {
+                    sum_over_neighbours::<_, true>(&prm, &k, &f, nb.of(i), i)
+                } else {
+                    sum_over_neighbours::<_, false>(&prm, &k, &f, nb.of(i), i)
+                }
+            };
             if want_power {
                 acc.par_iter_mut()
                     .zip(dissipation.par_iter_mut())
@@ -184,63 +195,107 @@ impl Forces {
     }
 }
 
-/// Pressure and viscous acceleration of particle i, and sum_j m_j Pi_ij v_ij . grad W.
+/// The constants of the pair loop, derived once per step from the parameters.
+struct Pair {
+    alpha: f64,
+    beta: f64,
+    epsilon: f64,
+    epsilon_positive: f64,
+    exponent: i32,
+    /// 1 / W(ds), for f_ij = (W(r_ij)/W(ds))^n.
+    inv_w_ds: f64,
+    h: f64,
+    /// eta^2 = 0.01 h^2 in phi_ij = h v_ij.x_ij / (r^2 + eta^2).
+    eta2: f64,
+}
+
+impl Pair {
+    fn new(p: &Params, w_ds: f64, h: f64) -> Self {
+        Self {
+            alpha: p.alpha,
+            beta: p.beta,
+            epsilon: p.epsilon,
+            epsilon_positive: p.epsilon_positive,
+            exponent: p.exponent,
+            inv_w_ds: 1.0 / w_ds,
+            h,
+            eta2: 0.01 * h * h,
+        }
+    }
+}
+
+/// x^n for a small positive n by repeated squaring (`powi` with a run-time exponent
+/// is a library call).
 #[inline(always)]
-fn sum_over_neighbours<K: Kernel>(
-    prm: &Params,
+fn int_pow(x: f64, n: i32) -> f64 {
+    match n {
+        4 => {
+            let x2 = x * x;
+            x2 * x2
+        }
+        _ => {
+            let (mut base, mut e, mut out) = (x, n as u32, 1.0);
+            while e > 0 {
+                if e & 1 == 1 {
+                    out *= base;
+                }
+                base *= base;
+                e >>= 1;
+            }
+            out
+        }
+    }
+}
+
+/// Pressure and viscous acceleration of particle i, and sum_j m_j Pi_ij v_ij . grad W.
+/// `ART` selects Monaghan's artificial pressure at compile time.
+#[inline(always)]
+fn sum_over_neighbours<K: Kernel, const ART: bool>(
+    prm: &Pair,
     k: &K,
     f: &Fields,
     neighbours: &[u32],
     i: usize,
-    h: f64,
-    w_ds: f64,
 ) -> (DVec2, f64) {
-    {
-        let (xi, vi, rhoi, pi) = (
-            f.x.fluid[i].0,
-            f.v.fluid[i].0,
-            f.rho.fluid[i].0,
-            f.p.fluid[i].0,
-        );
-        let pi_r2 = pi / (rhoi * rhoi);
-        let ci = f.c.fluid[i];
-        let eta2 = 0.01 * h * h;
-        let (mut acc, mut visc_power) = (DVec2::ZERO, 0.0);
-        for &j in neighbours {
-            let xij = xi - f.x.get(j).0;
-            let r = xij.length();
-            let grad = k.grad(xij, r);
-            let (rhoj, pj, mj) = (f.rho.get(j).0, f.p.get(j).0, f.m.get(j).0);
-            let pj_r2 = pj / (rhoj * rhoj);
-            let mut term = pi_r2 + pj_r2;
-            let vij = vi - f.v.get(j).0;
-            let vx = vij.dot(xij);
-            let mut visc = 0.0;
-            if vx < 0.0 {
-                let phi = h * vx / (r * r + eta2);
-                let cbar = 0.5 * (ci + *f.c.get(j));
-                visc = (-prm.alpha * cbar * phi + prm.beta * phi * phi) / (0.5 * (rhoi + rhoj));
-                term += visc;
-            }
-            if prm.artificial_pressure {
-                let fij = (k.w(r) / w_ds).powi(prm.exponent);
-                let big_r = if pi > 0.0 && pj > 0.0 {
-                    prm.epsilon_positive * (pi_r2 + pj_r2)
-                } else {
-                    let part = |p: f64, r2: f64| {
-                        if p < 0.0 {
-                            prm.epsilon * p.abs() * r2
-                        } else {
-                            0.0
-                        }
-                    };
-                    part(pi, 1.0 / (rhoi * rhoi)) + part(pj, 1.0 / (rhoj * rhoj))
-                };
-                term += big_r * fij;
-            }
-            acc -= mj * term * grad;
-            visc_power += mj * visc * vij.dot(grad);
+    let (xi, vi, rhoi) = (f.x.fluid[i].0, f.v.fluid[i].0, f.rho.fluid[i].0);
+    let Aux {
+        p_rho2: pi_r2,
+        c: ci,
+    } = f.aux.fluid[i];
+    let (mut acc, mut visc_power) = (DVec2::ZERO, 0.0);
+    for &j in neighbours {
+        let xij = xi - f.x.get(j).0;
+        let r = xij.length();
+        let grad = k.grad(xij, r);
+        let (rhoj, mj) = (f.rho.get(j).0, f.m.get(j).0);
+        let Aux {
+            p_rho2: pj_r2,
+            c: cj,
+        } = *f.aux.get(j);
+        let mut term = pi_r2 + pj_r2;
+        let vij = vi - f.v.get(j).0;
+        let vx = vij.dot(xij);
+        let mut visc = 0.0;
+        if vx < 0.0 {
+            // Monaghan's artificial viscosity Pi_ij = (-alpha cbar phi + beta phi^2) / rhobar.
+            let phi = prm.h * vx / (r * r + prm.eta2);
+            let cbar = 0.5 * (ci + cj);
+            visc = (-prm.alpha * cbar * phi + prm.beta * phi * phi) / (0.5 * (rhoi + rhoj));
+            term += visc;
         }
-        (acc, visc_power)
+        if ART {
+            // R f_ij^n: R = eps (|p_i|/rho_i^2 + |p_j|/rho_j^2) over the negative
+            // pressures, or eps_+ (p_i/rho_i^2 + p_j/rho_j^2) when both are positive.
+            let fij = int_pow(k.w(r) * prm.inv_w_ds, prm.exponent);
+            let big_r = if pi_r2 > 0.0 && pj_r2 > 0.0 {
+                prm.epsilon_positive * (pi_r2 + pj_r2)
+            } else {
+                prm.epsilon * ((-pi_r2).max(0.0) + (-pj_r2).max(0.0))
+            };
+            term += big_r * fij;
+        }
+        acc -= mj * term * grad;
+        visc_power += mj * visc * vij.dot(grad);
     }
+    (acc, visc_power)
 }

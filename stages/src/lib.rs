@@ -17,6 +17,7 @@ pub mod neighbour_grid;
 pub mod probe;
 pub mod reinitialise;
 pub mod snapshots;
+pub mod sort_particles;
 pub mod vtk_frames;
 
 use sph_core::StageRegistry;

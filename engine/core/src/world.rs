@@ -40,6 +40,28 @@ fn missing<T>() -> StepError {
     ))
 }
 
+/// Reorders column `T` of `arch` so that new entry k is old entry `order[k]` (a
+/// permutation of `0..arch.len()`). Returns false when the archetype has no `T`.
+/// Allocates one temporary column; callers sort every N steps, not every step.
+pub fn permute<T: Component + Copy>(arch: &Archetype, order: &[u32]) -> Result<bool, StepError> {
+    use rayon::prelude::*;
+    let Some(mut col) = arch.get::<&mut T>() else {
+        return Ok(false);
+    };
+    if order.len() != col.len() {
+        return Err(StepError::Internal(format!(
+            "permutation of {} entries applied to a column of {}",
+            order.len(),
+            col.len()
+        )));
+    }
+    let old: Vec<T> = col.to_vec();
+    col.par_iter_mut()
+        .zip(order.par_iter())
+        .for_each(|(new, &k)| *new = old[k as usize]);
+    Ok(true)
+}
+
 /// Inserts component `T` (default value) into every entity carrying marker `M` that
 /// lacks it. Stages call this at setup for the per-particle state they own, so a
 /// scenario without the stage carries no such column.
