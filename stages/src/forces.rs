@@ -5,14 +5,15 @@
 
 use crate::continuity::require_neighbours;
 use crate::neighbour_grid::Neighbours;
+use crate::packed::{with_packed, Fill, Packed};
 use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use sph_core::components::{Acceleration, Density, Fluid, Mass, Position, Pressure, Velocity};
+use sph_core::components::{Acceleration, Fluid};
 use sph_core::kernel::Kernel;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::world::{ensure_component, sum_fixed, Joined, Particles};
+use sph_core::world::{ensure_component, sum_fixed, Particles};
 use sph_core::{with_kernel, StageRegistry};
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -70,7 +71,7 @@ pub fn register(registry: &mut StageRegistry) {
             }
             Ok(Forces {
                 params: p,
-                aux: Vec::new(),
+                dissipation: Vec::new(),
             })
         },
     );
@@ -78,18 +79,8 @@ pub fn register(registry: &mut StageRegistry) {
 
 pub struct Forces {
     params: Params,
-    /// Per-particle p/rho^2 and sound speed c(rho) in the joint numbering, refreshed
-    /// each step so the pair loop needs no powf and no division for them.
-    aux: Vec<Aux>,
-}
-
-/// What the pair loop reads of particle j besides the columns.
-#[derive(Clone, Copy, Default)]
-struct Aux {
-    /// p / rho^2 [m^3/(kg s^2) = Pa m^6/kg^2].
-    p_rho2: f64,
-    /// Sound speed c(rho) [m/s].
-    c: f64,
+    /// Per-particle dissipation rates, kept between steps (no per-step allocation).
+    dissipation: Vec<f64>,
 }
 
 /// Work dissipated by the artificial viscosity: the forces stage stores its rate here
@@ -113,7 +104,11 @@ impl Stage for Forces {
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
         let want_power = sim.resources.contains::<ViscousDissipation>();
-        let power = self.accelerations(sim, want_power)?;
+        let fill = Fill::Pressure(sim.constants.eos);
+        let power = with_packed(sim, fill, |sim, particles, all| {
+            self.accelerations(sim, particles, all, want_power)
+        })?
+        .unwrap_or(0.0);
         if let Some(d) = sim.resources.get_mut::<ViscousDissipation>() {
             d.power = power;
         }
@@ -121,59 +116,32 @@ impl Stage for Forces {
     }
 }
 
-/// The fields a pair interaction reads, in the joint fluid+ghost numbering.
-struct Fields<'a> {
-    x: Joined<'a, Position>,
-    v: Joined<'a, Velocity>,
-    rho: Joined<'a, Density>,
-    m: Joined<'a, Mass>,
-    aux: Joined<'a, Aux>,
-}
-
 impl Forces {
-    /// Writes every fluid particle's acceleration; returns the viscous dissipation rate
+    /// Writes every fluid particle's acceleration from the packed particles `all`;
+    /// returns the viscous dissipation rate
     /// (1/2) sum_i m_i sum_j m_j Pi_ij v_ij . grad_i W_ij when asked (else 0).
-    fn accelerations(&mut self, sim: &Sim, want_power: bool) -> Result<f64, StepError> {
+    fn accelerations(
+        &mut self,
+        sim: &Sim,
+        particles: &Particles,
+        all: &[Packed],
+        want_power: bool,
+    ) -> Result<f64, StepError> {
         let Some(nb) = sim.resources.get::<Neighbours>() else {
             return Ok(0.0);
         };
-        let Some(particles) = Particles::of(&sim.world) else {
-            return Ok(0.0);
-        };
-        let (x, v, rho) = (
-            particles.joined::<Position>()?,
-            particles.joined::<Velocity>()?,
-            particles.joined::<Density>()?,
-        );
-        let (p, m) = (particles.joined::<Pressure>()?, particles.joined::<Mass>()?);
         let c = &sim.constants;
-        let (eos, g, h, ds) = (c.eos, c.gravity, c.h, c.spacing);
-        let (rho_all, p_all) = (rho.view(), p.view());
-        self.aux.resize(rho_all.len(), Aux::default());
-        self.aux.par_iter_mut().enumerate().for_each(|(j, a)| {
-            let (rho, p) = (rho_all.get(j as u32).0, p_all.get(j as u32).0);
-            *a = Aux {
-                p_rho2: p / (rho * rho),
-                c: eos.sound_speed(rho),
-            };
-        });
-        let n_fluid = rho_all.fluid.len();
-        let f = Fields {
-            x: x.view(),
-            v: v.view(),
-            rho: rho_all,
-            m: m.view(),
-            aux: Joined::new(&self.aux[..n_fluid], &self.aux[n_fluid..]),
-        };
+        let (g, h, ds) = (c.gravity, c.h, c.spacing);
         let mut acc = particles.fluid_mut::<Acceleration>()?;
-        let mut dissipation = vec![0.0; if want_power { acc.len() } else { 0 }];
+        let mut dissipation = std::mem::take(&mut self.dissipation);
+        dissipation.resize(if want_power { acc.len() } else { 0 }, 0.0);
         with_kernel!(c.kernel, h, |k| {
             let prm = Pair::new(&self.params, k.w(ds), h);
             let pair = |i: usize| {
                 if self.params.artificial_pressure {
-                    sum_over_neighbours::<_, true>(&prm, &k, &f, nb.of(i), i)
+                    sum_over_neighbours::<_, true>(&prm, &k, all, nb.of(i), i)
                 } else {
-                    sum_over_neighbours::<_, false>(&prm, &k, &f, nb.of(i), i)
+                    sum_over_neighbours::<_, false>(&prm, &k, all, nb.of(i), i)
                 }
             };
             if want_power {
@@ -183,7 +151,7 @@ impl Forces {
                     .for_each(|(i, (a, d))| {
                         let (sum, visc) = pair(i);
                         a.0 = sum + g;
-                        *d = 0.5 * f.m.fluid[i].0 * visc;
+                        *d = 0.5 * all[i].m * visc;
                     });
             } else {
                 acc.par_iter_mut()
@@ -191,7 +159,9 @@ impl Forces {
                     .for_each(|(i, a)| a.0 = pair(i).0 + g);
             }
         });
-        Ok(sum_fixed(dissipation.len(), |i| dissipation[i]))
+        let power = sum_fixed(dissipation.len(), |i| dissipation[i]);
+        self.dissipation = dissipation;
+        Ok(power)
     }
 }
 
@@ -253,27 +223,27 @@ fn int_pow(x: f64, n: i32) -> f64 {
 fn sum_over_neighbours<K: Kernel, const ART: bool>(
     prm: &Pair,
     k: &K,
-    f: &Fields,
+    all: &[Packed],
     neighbours: &[u32],
     i: usize,
 ) -> (DVec2, f64) {
-    let (xi, vi, rhoi) = (f.x.fluid[i].0, f.v.fluid[i].0, f.rho.fluid[i].0);
-    let Aux {
+    let Packed {
+        x: xi,
+        v: vi,
+        rho: rhoi,
         p_rho2: pi_r2,
         c: ci,
-    } = f.aux.fluid[i];
+        ..
+    } = all[i];
     let (mut acc, mut visc_power) = (DVec2::ZERO, 0.0);
     for &j in neighbours {
-        let xij = xi - f.x.get(j).0;
+        let pj = &all[j as usize];
+        let xij = xi - pj.x;
         let r = xij.length();
         let grad = k.grad(xij, r);
-        let (rhoj, mj) = (f.rho.get(j).0, f.m.get(j).0);
-        let Aux {
-            p_rho2: pj_r2,
-            c: cj,
-        } = *f.aux.get(j);
+        let (rhoj, mj, pj_r2, cj) = (pj.rho, pj.m, pj.p_rho2, pj.c);
         let mut term = pi_r2 + pj_r2;
-        let vij = vi - f.v.get(j).0;
+        let vij = vi - pj.v;
         let vx = vij.dot(xij);
         let mut visc = 0.0;
         if vx < 0.0 {

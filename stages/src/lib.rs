@@ -14,6 +14,7 @@ pub mod forces;
 pub mod ghost_walls;
 pub mod integrate;
 pub mod neighbour_grid;
+pub mod packed;
 pub mod probe;
 pub mod reinitialise;
 pub mod snapshots;

@@ -77,8 +77,10 @@ pub struct CellGrid {
     start: Vec<u32>,
     /// Joint indices, cell by cell, ascending within a cell.
     particles: Vec<u32>,
-    /// Positions in the order of `particles`, so a candidate scan reads contiguous memory.
-    xs: Vec<DVec2>,
+    /// x and y of the positions in the order of `particles` (separate arrays), so a
+    /// candidate scan reads contiguous memory and its distance test vectorises.
+    xs: Vec<f64>,
+    ys: Vec<f64>,
     /// Each particle's cell (scratch kept between steps).
     cells: Vec<u32>,
 }
@@ -125,11 +127,14 @@ impl CellGrid {
             &mut self.particles,
         );
         self.cells = cells;
-        self.xs.resize(n, DVec2::ZERO);
-        self.xs
-            .par_iter_mut()
-            .zip(self.particles.par_iter())
-            .for_each(|(x, &j)| *x = positions.get(j).0);
+        self.xs.resize(n, 0.0);
+        self.ys.resize(n, 0.0);
+        (&mut self.xs[..], &mut self.ys[..], &self.particles[..])
+            .into_par_iter()
+            .for_each(|(x, y, &j)| {
+                let p = positions.get(j).0;
+                (*x, *y) = (p.x, p.y);
+            });
     }
 
     /// The three index ranges (into `particles` / `xs`) of the 3x3 cells around `x`,
@@ -210,7 +215,7 @@ impl Neighbours {
         let g = &self.grid;
         blocks
             + 4 * (g.start.capacity() + g.particles.capacity() + g.cells.capacity())
-            + 16 * g.xs.capacity()
+            + 8 * (g.xs.capacity() + g.ys.capacity())
     }
 }
 
@@ -280,20 +285,28 @@ impl NeighbourGrid {
             block.list.clear();
             for i in range {
                 let xi = fpos[i].0;
-                for cand in grid.ranges_near(xi) {
-                    // Branch-free append: write every candidate, keep it if it is
-                    // within the support and not i itself.
-                    let mut len = block.list.len();
-                    block.list.resize(len + cand.len(), 0);
-                    let (xs, ids) = (&grid.xs[cand.clone()], &grid.particles[cand]);
-                    for (x, &j) in xs.iter().zip(ids) {
-                        block.list[len] = j;
-                        let keep = (xi - *x).length_squared() < r2max && j as usize != i;
-                        len += keep as usize;
+                let ranges = grid.ranges_near(xi);
+                // Branch-free append: write every candidate, keep it (advance the
+                // length) if it is within the support and not i itself.
+                let base = block.list.len();
+                let total: usize = ranges.iter().map(|r| r.len()).sum();
+                block.list.resize(base + total, 0);
+                // A plain slice, so the loop keeps its pointer in a register.
+                let out = &mut block.list[base..];
+                let mut kept = 0;
+                for cand in ranges {
+                    let (xs, ys) = (&grid.xs[cand.clone()], &grid.ys[cand.clone()]);
+                    let ids = &grid.particles[cand];
+                    for ((&x, &y), &j) in xs.iter().zip(ys).zip(ids) {
+                        let (dx, dy) = (xi.x - x, xi.y - y);
+                        let keep = (dx * dx + dy * dy < r2max) & (j as usize != i);
+                        out[kept] = j;
+                        kept += keep as usize;
                     }
-                    block.list.truncate(len);
                 }
-                block.offsets.push(block.list.len() as u32);
+                let len = base + kept;
+                block.list.truncate(len);
+                block.offsets.push(len as u32);
             }
         });
         nb.blocks.truncate(n.div_ceil(BLOCK));

@@ -7,9 +7,10 @@ use crate::continuity::require_neighbours;
 use crate::ghost_walls::refresh_ghost_density;
 use crate::integrate::HalfDensity;
 use crate::neighbour_grid::Neighbours;
+use crate::packed::{with_packed, Fill, Packed};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use sph_core::components::{Density, Mass, Position};
+use sph_core::components::Density;
 use sph_core::kernel::Kernel;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
@@ -47,40 +48,40 @@ impl Stage for Reinitialise {
     }
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
-        let Some(nb) = sim.resources.get::<Neighbours>() else {
+        let filtered = &mut self.filtered;
+        let done = with_packed(sim, Fill::Basic, |sim, _, all| {
+            let Some(nb) = sim.resources.get::<Neighbours>() else {
+                return Ok(false);
+            };
+            let c = &sim.constants;
+            filtered.resize(nb.n_fluid, 0.0);
+            with_kernel!(c.kernel, c.h, |k| {
+                let w0 = k.w(0.0);
+                filtered.par_iter_mut().enumerate().for_each(|(i, out)| {
+                    let Packed {
+                        x: xi,
+                        m: mi,
+                        rho: rhoi,
+                        ..
+                    } = all[i];
+                    let (mut num, mut den) = (mi * w0, mi / rhoi * w0);
+                    for &j in nb.of(i) {
+                        let pj = &all[j as usize];
+                        let w = k.w((xi - pj.x).length());
+                        num += pj.m * w;
+                        den += pj.m / pj.rho * w;
+                    }
+                    *out = num / den;
+                });
+            });
+            Ok(true)
+        })?;
+        if done != Some(true) {
             return Ok(());
-        };
+        }
         let Some(particles) = Particles::of(&sim.world) else {
             return Ok(());
         };
-        {
-            let (x, rho, m) = (
-                particles.joined::<Position>()?,
-                particles.joined::<Density>()?,
-                particles.joined::<Mass>()?,
-            );
-            let (x, rho, m) = (x.view(), rho.view(), m.view());
-            let c = &sim.constants;
-            self.filtered.resize(x.fluid.len(), 0.0);
-            with_kernel!(c.kernel, c.h, |k| {
-                let w0 = k.w(0.0);
-                self.filtered
-                    .par_iter_mut()
-                    .enumerate()
-                    .for_each(|(i, out)| {
-                        let xi = x.fluid[i].0;
-                        let (mi, rhoi) = (m.fluid[i].0, rho.fluid[i].0);
-                        let (mut num, mut den) = (mi * w0, mi / rhoi * w0);
-                        for &j in nb.of(i) {
-                            let w = k.w((xi - x.get(j).0).length());
-                            let mj = m.get(j).0;
-                            num += mj * w;
-                            den += mj / rho.get(j).0 * w;
-                        }
-                        *out = num / den;
-                    });
-            });
-        }
         // Shift the leapfrog's half-step density by the same correction.
         let mut rho = particles.fluid_mut::<Density>()?;
         let mut half = particles.fluid.get::<&mut HalfDensity>();
