@@ -23,6 +23,10 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
+/// Counts heap bytes for the benchmark (engine::bench::CountingAlloc).
+#[global_allocator]
+static ALLOC: engine::bench::CountingAlloc = engine::bench::CountingAlloc;
+
 #[derive(Parser)]
 #[command(name = "sph-bench")]
 struct Cli {

@@ -17,9 +17,43 @@ use sph_core::stage::{Stage, StepError};
 use sph_core::world::count;
 use sph_core::Scenario;
 use sph_stages::neighbour_grid::Neighbours;
+use std::alloc::{GlobalAlloc, Layout, System};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// A counting global allocator: live and peak heap bytes, independent of how the
+/// system allocator returns memory to the OS. The `engine` and `sph-bench` binaries
+/// install it (`#[global_allocator]` in their main.rs); a binary that does not
+/// reports heap figures of 0. Cost: two relaxed atomic operations per allocation,
+/// and the engine does not allocate per step.
+pub struct CountingAlloc;
+
+static LIVE: AtomicUsize = AtomicUsize::new(0);
+static PEAK: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for CountingAlloc {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        // SAFETY: forwarded unchanged to the system allocator.
+        let p = unsafe { System.alloc(layout) };
+        if !p.is_null() {
+            let live = LIVE.fetch_add(layout.size(), Ordering::Relaxed) + layout.size();
+            PEAK.fetch_max(live, Ordering::Relaxed);
+        }
+        p
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: forwarded unchanged to the system allocator.
+        unsafe { System.dealloc(ptr, layout) };
+        LIVE.fetch_sub(layout.size(), Ordering::Relaxed);
+    }
+}
+
+/// (live, peak) heap bytes counted by [`CountingAlloc`] (zeros when not installed).
+pub fn heap_bytes() -> (usize, usize) {
+    (LIVE.load(Ordering::Relaxed), PEAK.load(Ordering::Relaxed))
+}
 
 /// Options of `engine bench`.
 #[derive(clap::Args, Debug, Clone)]
@@ -75,6 +109,12 @@ pub struct Measurement {
     pub peak_bytes: u64,
     /// Resident memory before the scenario was loaded [bytes].
     pub base_bytes: u64,
+    /// Resident memory at the end of the run, the state still held (VmRSS) [bytes].
+    pub end_bytes: u64,
+    /// Live heap at the end of the run, minus before loading (counting allocator).
+    pub heap_end: u64,
+    /// Peak live heap during the run (setup included), minus before loading.
+    pub heap_peak: u64,
     pub status: String,
     /// The run's probes.csv `front` column, (time, x), when the scenario writes it.
     pub front: Vec<(f64, f64)>,
@@ -87,6 +127,11 @@ impl Measurement {
     /// Peak memory above the process's starting footprint, per fluid particle.
     pub fn bytes_per_particle(&self) -> f64 {
         self.peak_bytes.saturating_sub(self.base_bytes) as f64 / self.particles.max(1) as f64
+    }
+    /// Live heap while stepping (at the end of the run) per fluid particle: the
+    /// state, lists and buffers the run holds, without the transient peak of setup.
+    pub fn steady_bytes_per_particle(&self) -> f64 {
+        self.heap_end as f64 / self.particles.max(1) as f64
     }
     fn share(&self, stage: &str) -> f64 {
         let total: f64 = self.stages.iter().map(|s| s.1).sum();
@@ -202,6 +247,7 @@ pub fn run_case(
     out: &Path,
 ) -> Result<Measurement, String> {
     let base_bytes = proc_status("VmRSS:");
+    let heap_base = heap_bytes().0;
     let mut text =
         std::fs::read_to_string(scenario).map_err(|e| format!("{}: {e}", scenario.display()))?;
     let mut registry = sph_stages::standard_registry();
@@ -247,6 +293,8 @@ pub fn run_case(
         trace: None,
     };
     let (summary, sim) = run_keeping_state(scenario, &opts).map_err(|e| e.to_string())?;
+    let end_bytes = proc_status("VmRSS:");
+    let (heap_end, heap_peak) = heap_bytes();
     let pairs = sim
         .resources
         .get::<Neighbours>()
@@ -267,6 +315,9 @@ pub fn run_case(
             .collect(),
         peak_bytes: proc_status("VmHWM:"),
         base_bytes,
+        end_bytes,
+        heap_end: heap_end.saturating_sub(heap_base) as u64,
+        heap_peak: heap_peak.saturating_sub(heap_base) as u64,
         status: summary.status,
         front,
     })
@@ -442,7 +493,7 @@ fn efficiency(m: &Measurement, all: &[Measurement]) -> Option<f64> {
 }
 
 fn csv_table(fixed: &[Measurement], timed: &[Measurement]) -> String {
-    let mut out = String::from("kind,particles,threads,steps,simulated_time_s,wall_s,particle_steps_per_s,interactions_per_s,ghosts_mean,peak_mib,bytes_per_particle,parallel_efficiency");
+    let mut out = String::from("kind,particles,threads,steps,simulated_time_s,wall_s,particle_steps_per_s,interactions_per_s,ghosts_mean,peak_rss_mib,rss_bytes_per_particle_peak,heap_bytes_per_particle_peak,heap_bytes_per_particle_steady,parallel_efficiency");
     for s in SHOWN.iter().chain(OUTPUTS.iter()) {
         let _ = write!(out, ",{s}_pct");
     }
@@ -452,7 +503,7 @@ fn csv_table(fixed: &[Measurement], timed: &[Measurement]) -> String {
             let eff = efficiency(m, fixed).map_or(String::new(), |e| format!("{e:.3}"));
             let _ = write!(
                 out,
-                "{kind},{},{},{},{:.6},{:.3},{:.4e},{:.4e},{:.0},{:.1},{:.0},{eff}",
+                "{kind},{},{},{},{:.6},{:.3},{:.4e},{:.4e},{:.0},{:.1},{:.0},{:.0},{:.0},{eff}",
                 m.particles,
                 m.threads,
                 m.steps,
@@ -463,6 +514,8 @@ fn csv_table(fixed: &[Measurement], timed: &[Measurement]) -> String {
                 m.ghosts_mean,
                 m.peak_bytes as f64 / 1048576.0,
                 m.bytes_per_particle(),
+                m.heap_peak as f64 / m.particles.max(1) as f64,
+                m.steady_bytes_per_particle(),
             );
             for s in SHOWN.iter().chain(OUTPUTS.iter()) {
                 let _ = write!(out, ",{:.2}", m.share(s));
@@ -481,12 +534,12 @@ fn markdown(fixed: &[Measurement], timed: &[Measurement], args: &BenchArgs) -> S
         args.repeats.max(1),
         std::thread::available_parallelism().map_or(0, |n| n.get())
     );
-    out += "| particles | threads | steps | wall [s] | particle-steps/s | interactions/s | peak [MiB] | bytes/particle | parallel eff. |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+    out += "| particles | threads | steps | wall [s] | particle-steps/s | interactions/s | peak RSS [MiB] | B/particle: peak RSS | peak heap | heap while stepping | parallel eff. |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
     for m in fixed {
         let eff = efficiency(m, fixed).map_or("-".into(), |e| format!("{:.0} %", 100.0 * e));
         let _ = writeln!(
             out,
-            "| {} | {} | {} | {:.2} | {:.3e} | {:.3e} | {:.0} | {:.0} | {eff} |",
+            "| {} | {} | {} | {:.2} | {:.3e} | {:.3e} | {:.0} | {:.0} | {:.0} | {:.0} | {eff} |",
             m.particles,
             m.threads,
             m.steps,
@@ -494,7 +547,9 @@ fn markdown(fixed: &[Measurement], timed: &[Measurement], args: &BenchArgs) -> S
             m.particle_steps_per_second(),
             m.interactions / m.wall_seconds.max(1e-12),
             m.peak_bytes as f64 / 1048576.0,
-            m.bytes_per_particle()
+            m.bytes_per_particle(),
+            m.heap_peak as f64 / m.particles.max(1) as f64,
+            m.steady_bytes_per_particle()
         );
     }
     out += "\nPer-stage share of the step time [%]:\n\n| particles | threads |";
