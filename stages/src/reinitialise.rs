@@ -85,12 +85,17 @@ impl Stage for Reinitialise {
         // Shift the leapfrog's half-step density by the same correction.
         let mut rho = particles.fluid_mut::<Density>()?;
         let mut half = particles.fluid.get::<&mut HalfDensity>();
-        for (i, r) in rho.iter_mut().enumerate() {
-            let delta = self.filtered[i] - r.0;
-            r.0 = self.filtered[i];
-            if let Some(h) = half.as_deref_mut() {
-                h[i].0 += delta;
-            }
+        let filtered = &self.filtered[..];
+        match half.as_deref_mut() {
+            Some(half) => (&mut rho[..], half, filtered)
+                .into_par_iter()
+                .for_each(|(r, h, &f)| {
+                    h.0 += f - r.0;
+                    r.0 = f;
+                }),
+            None => (&mut rho[..], filtered)
+                .into_par_iter()
+                .for_each(|(r, &f)| r.0 = f),
         }
         drop((rho, half));
         refresh_ghost_density(sim)
