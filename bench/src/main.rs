@@ -18,6 +18,7 @@ use salva2d::object::interaction_groups::InteractionGroups;
 use salva2d::object::{Boundary, Fluid};
 use salva2d::solver::{ArtificialViscosity, DFSPHSolver};
 use salva2d::LiquidWorld;
+use sph_tests::support::{interpolate, reference};
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -69,30 +70,8 @@ const G: f64 = 9.81;
 const RHO0: f64 = 1000.0;
 
 /// Martin & Moyce (1952), n^2 = 2, a = 2.25 in: (T, Z) with T = t sqrt(2g/a), Z = z/a.
-const MM: &str = include_str!("../../tests/data/martin_moyce_1952_surge_n2-2_a2.25in_pysph.csv");
-
 fn martin_moyce() -> Vec<(f64, f64)> {
-    let mut v: Vec<(f64, f64)> = MM
-        .lines()
-        .filter(|l| !l.starts_with('#'))
-        .filter_map(|l| {
-            let mut it = l.split(',').map(|s| s.trim().parse::<f64>());
-            Some((it.next()?.ok()?, it.next()?.ok()?))
-        })
-        .collect();
-    v.sort_by(|a, b| a.0.total_cmp(&b.0));
-    v
-}
-
-fn interpolate(series: &[(f64, f64)], t: f64) -> f64 {
-    match series.iter().position(|p| p.0 >= t) {
-        Some(0) => series[0].1,
-        Some(k) => {
-            let (a, b) = (series[k - 1], series[k]);
-            a.1 + (b.1 - a.1) * (t - a.0) / (b.0 - a.0)
-        }
-        None => series.last().map_or(f64::NAN, |p| p.1),
-    }
+    reference("martin_moyce_1952_surge_n2-2_a2.25in_pysph.csv")
 }
 
 /// Front error against the data over 1 <= T <= T(end): (mean |Z/Z_data - 1|, the
