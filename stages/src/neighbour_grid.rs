@@ -290,7 +290,15 @@ impl NeighbourGrid {
                 // length) if it is within the support and not i itself.
                 let base = block.list.len();
                 let total: usize = ranges.iter().map(|r| r.len()).sum();
-                block.list.resize(base + total, 0);
+                // Grow by an eighth rather than by doubling: the lists keep their
+                // capacity from step to step, so doubling would hold up to twice the
+                // memory the lists need.
+                let need = base + total;
+                if need > block.list.capacity() {
+                    let more = (need - block.list.len()).max(block.list.len() / 8);
+                    block.list.reserve_exact(more);
+                }
+                block.list.resize(need, 0);
                 // A plain slice, so the loop keeps its pointer in a register.
                 let out = &mut block.list[base..];
                 let mut kept = 0;
