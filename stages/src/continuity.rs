@@ -2,13 +2,14 @@
 //! "Governing equations"), summed over fluid and ghost neighbours.
 
 use crate::neighbour_grid::Neighbours;
+use crate::packed::{with_packed, Fill};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use sph_core::components::{DensityRate, Fluid, Mass, Position, Velocity};
+use sph_core::components::{DensityRate, Fluid};
 use sph_core::kernel::Kernel;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::world::{ensure_component, Particles};
+use sph_core::world::ensure_component;
 use sph_core::{with_kernel, StageRegistry};
 
 #[derive(Debug, Default, Serialize, Deserialize)]
@@ -37,32 +38,27 @@ impl Stage for Continuity {
     }
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
-        let Some(nb) = sim.resources.get::<Neighbours>() else {
-            return Ok(());
-        };
-        let Some(particles) = Particles::of(&sim.world) else {
-            return Ok(());
-        };
-        let (x, v, m) = (
-            particles.joined::<Position>()?,
-            particles.joined::<Velocity>()?,
-            particles.joined::<Mass>()?,
-        );
-        let (x, v, m) = (x.view(), v.view(), m.view());
-        let mut rate = particles.fluid_mut::<DensityRate>()?;
-        let c = &sim.constants;
-        with_kernel!(c.kernel, c.h, |k| {
-            rate.par_iter_mut().enumerate().for_each(|(i, out)| {
-                let (xi, vi) = (x.fluid[i].0, v.fluid[i].0);
-                let mut sum = 0.0;
-                for &j in nb.of(i) {
-                    let xij = xi - x.get(j).0;
-                    let r = xij.length();
-                    sum += m.get(j).0 * (vi - v.get(j).0).dot(k.grad(xij, r));
-                }
-                out.0 = sum;
-            })
-        });
+        with_packed(sim, Fill::Velocity, |sim, particles, all| {
+            let Some(nb) = sim.resources.get::<Neighbours>() else {
+                return Ok(());
+            };
+            let mut rate = particles.fluid_mut::<DensityRate>()?;
+            let c = &sim.constants;
+            with_kernel!(c.kernel, c.h, |k| {
+                rate.par_iter_mut().enumerate().for_each(|(i, out)| {
+                    let (xi, vi) = (all[i].x, all[i].v);
+                    let mut sum = 0.0;
+                    for &j in nb.of(i) {
+                        let pj = &all[j as usize];
+                        let xij = xi - pj.x;
+                        let r = xij.length();
+                        sum += pj.m * (vi - pj.v).dot(k.grad(xij, r));
+                    }
+                    out.0 = sum;
+                })
+            });
+            Ok(())
+        })?;
         Ok(())
     }
 }

@@ -5,14 +5,15 @@
 
 use crate::continuity::require_neighbours;
 use crate::neighbour_grid::Neighbours;
+use crate::packed::{with_packed, Fill, Packed};
 use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use sph_core::components::{Acceleration, Density, Fluid, Mass, Position, Pressure, Velocity};
+use sph_core::components::{Acceleration, Fluid};
 use sph_core::kernel::Kernel;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::world::{ensure_component, sum_fixed, Joined, Particles};
+use sph_core::world::{ensure_component, sum_fixed, Particles};
 use sph_core::{with_kernel, StageRegistry};
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -70,7 +71,7 @@ pub fn register(registry: &mut StageRegistry) {
             }
             Ok(Forces {
                 params: p,
-                sound: Vec::new(),
+                dissipation: Vec::new(),
             })
         },
     );
@@ -78,9 +79,8 @@ pub fn register(registry: &mut StageRegistry) {
 
 pub struct Forces {
     params: Params,
-    /// Per-particle sound speed c(rho) in the joint numbering, refreshed each step so the
-    /// pair loop needs no powf.
-    sound: Vec<f64>,
+    /// Per-particle dissipation rates, kept between steps (no per-step allocation).
+    dissipation: Vec<f64>,
 }
 
 /// Work dissipated by the artificial viscosity: the forces stage stores its rate here
@@ -104,7 +104,11 @@ impl Stage for Forces {
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
         let want_power = sim.resources.contains::<ViscousDissipation>();
-        let power = self.accelerations(sim, want_power)?;
+        let fill = Fill::Pressure(sim.constants.eos);
+        let power = with_packed(sim, fill, |sim, particles, all| {
+            self.accelerations(sim, particles, all, want_power)
+        })?
+        .unwrap_or(0.0);
         if let Some(d) = sim.resources.get_mut::<ViscousDissipation>() {
             d.power = power;
         }
@@ -112,59 +116,34 @@ impl Stage for Forces {
     }
 }
 
-/// The fields a pair interaction reads, in the joint fluid+ghost numbering.
-struct Fields<'a> {
-    x: Joined<'a, Position>,
-    v: Joined<'a, Velocity>,
-    rho: Joined<'a, Density>,
-    p: Joined<'a, Pressure>,
-    m: Joined<'a, Mass>,
-    /// Sound speed c(rho).
-    c: Joined<'a, f64>,
-}
-
 impl Forces {
-    /// Writes every fluid particle's acceleration; returns the viscous dissipation rate
+    /// Writes every fluid particle's acceleration from the packed particles `all`;
+    /// returns the viscous dissipation rate
     /// (1/2) sum_i m_i sum_j m_j Pi_ij v_ij . grad_i W_ij when asked (else 0).
-    fn accelerations(&mut self, sim: &Sim, want_power: bool) -> Result<f64, StepError> {
+    fn accelerations(
+        &mut self,
+        sim: &Sim,
+        particles: &Particles,
+        all: &[Packed],
+        want_power: bool,
+    ) -> Result<f64, StepError> {
         let Some(nb) = sim.resources.get::<Neighbours>() else {
             return Ok(0.0);
         };
-        let Some(particles) = Particles::of(&sim.world) else {
-            return Ok(0.0);
-        };
-        let (x, v, rho) = (
-            particles.joined::<Position>()?,
-            particles.joined::<Velocity>()?,
-            particles.joined::<Density>()?,
-        );
-        let (p, m) = (particles.joined::<Pressure>()?, particles.joined::<Mass>()?);
         let c = &sim.constants;
-        let (eos, g, h, ds) = (c.eos, c.gravity, c.h, c.spacing);
-        let rho_all = rho.view();
-        self.sound.resize(rho_all.len(), 0.0);
-        self.sound
-            .par_iter_mut()
-            .enumerate()
-            .for_each(|(j, s)| *s = eos.sound_speed(rho_all.get(j as u32).0));
-        let sound = Joined::new(
-            &self.sound[..rho_all.fluid.len()],
-            &self.sound[rho_all.fluid.len()..],
-        );
-        let f = Fields {
-            x: x.view(),
-            v: v.view(),
-            rho: rho.view(),
-            p: p.view(),
-            m: m.view(),
-            c: sound,
-        };
+        let (g, h, ds) = (c.gravity, c.h, c.spacing);
         let mut acc = particles.fluid_mut::<Acceleration>()?;
-        let mut dissipation = vec![0.0; if want_power { acc.len() } else { 0 }];
+        let mut dissipation = std::mem::take(&mut self.dissipation);
+        dissipation.resize(if want_power { acc.len() } else { 0 }, 0.0);
         with_kernel!(c.kernel, h, |k| {
-            let w_ds = k.w(ds);
-            let prm = &self.params;
-            let pair = |i: usize| sum_over_neighbours(prm, &k, &f, nb.of(i), i, h, w_ds);
+            let prm = Pair::new(&self.params, k.w(ds), h);
+            let pair = |i: usize| {
+                if self.params.artificial_pressure {
+                    sum_over_neighbours::<_, true>(&prm, &k, all, nb.of(i), i)
+                } else {
+                    sum_over_neighbours::<_, false>(&prm, &k, all, nb.of(i), i)
+                }
+            };
             if want_power {
                 acc.par_iter_mut()
                     .zip(dissipation.par_iter_mut())
@@ -172,7 +151,7 @@ impl Forces {
                     .for_each(|(i, (a, d))| {
                         let (sum, visc) = pair(i);
                         a.0 = sum + g;
-                        *d = 0.5 * f.m.fluid[i].0 * visc;
+                        *d = 0.5 * all[i].m * visc;
                     });
             } else {
                 acc.par_iter_mut()
@@ -180,67 +159,113 @@ impl Forces {
                     .for_each(|(i, a)| a.0 = pair(i).0 + g);
             }
         });
-        Ok(sum_fixed(dissipation.len(), |i| dissipation[i]))
+        let power = sum_fixed(dissipation.len(), |i| dissipation[i]);
+        self.dissipation = dissipation;
+        Ok(power)
+    }
+}
+
+/// The constants of the pair loop, derived once per step from the parameters.
+struct Pair {
+    alpha: f64,
+    beta: f64,
+    epsilon: f64,
+    epsilon_positive: f64,
+    exponent: i32,
+    /// 1 / W(ds), for f_ij = (W(r_ij)/W(ds))^n.
+    inv_w_ds: f64,
+    h: f64,
+    /// eta^2 = 0.01 h^2 in phi_ij = h v_ij.x_ij / (r^2 + eta^2).
+    eta2: f64,
+}
+
+impl Pair {
+    fn new(p: &Params, w_ds: f64, h: f64) -> Self {
+        Self {
+            alpha: p.alpha,
+            beta: p.beta,
+            epsilon: p.epsilon,
+            epsilon_positive: p.epsilon_positive,
+            exponent: p.exponent,
+            inv_w_ds: 1.0 / w_ds,
+            h,
+            eta2: 0.01 * h * h,
+        }
+    }
+}
+
+/// x^n for a small positive n by repeated squaring (`powi` with a run-time exponent
+/// is a library call).
+#[inline(always)]
+fn int_pow(x: f64, n: i32) -> f64 {
+    match n {
+        4 => {
+            let x2 = x * x;
+            x2 * x2
+        }
+        _ => {
+            let (mut base, mut e, mut out) = (x, n as u32, 1.0);
+            while e > 0 {
+                if e & 1 == 1 {
+                    out *= base;
+                }
+                base *= base;
+                e >>= 1;
+            }
+            out
+        }
     }
 }
 
 /// Pressure and viscous acceleration of particle i, and sum_j m_j Pi_ij v_ij . grad W.
+/// `ART` selects Monaghan's artificial pressure at compile time.
 #[inline(always)]
-fn sum_over_neighbours<K: Kernel>(
-    prm: &Params,
+fn sum_over_neighbours<K: Kernel, const ART: bool>(
+    prm: &Pair,
     k: &K,
-    f: &Fields,
+    all: &[Packed],
     neighbours: &[u32],
     i: usize,
-    h: f64,
-    w_ds: f64,
 ) -> (DVec2, f64) {
-    {
-        let (xi, vi, rhoi, pi) = (
-            f.x.fluid[i].0,
-            f.v.fluid[i].0,
-            f.rho.fluid[i].0,
-            f.p.fluid[i].0,
-        );
-        let pi_r2 = pi / (rhoi * rhoi);
-        let ci = f.c.fluid[i];
-        let eta2 = 0.01 * h * h;
-        let (mut acc, mut visc_power) = (DVec2::ZERO, 0.0);
-        for &j in neighbours {
-            let xij = xi - f.x.get(j).0;
-            let r = xij.length();
-            let grad = k.grad(xij, r);
-            let (rhoj, pj, mj) = (f.rho.get(j).0, f.p.get(j).0, f.m.get(j).0);
-            let pj_r2 = pj / (rhoj * rhoj);
-            let mut term = pi_r2 + pj_r2;
-            let vij = vi - f.v.get(j).0;
-            let vx = vij.dot(xij);
-            let mut visc = 0.0;
-            if vx < 0.0 {
-                let phi = h * vx / (r * r + eta2);
-                let cbar = 0.5 * (ci + *f.c.get(j));
-                visc = (-prm.alpha * cbar * phi + prm.beta * phi * phi) / (0.5 * (rhoi + rhoj));
-                term += visc;
-            }
-            if prm.artificial_pressure {
-                let fij = (k.w(r) / w_ds).powi(prm.exponent);
-                let big_r = if pi > 0.0 && pj > 0.0 {
-                    prm.epsilon_positive * (pi_r2 + pj_r2)
-                } else {
-                    let part = |p: f64, r2: f64| {
-                        if p < 0.0 {
-                            prm.epsilon * p.abs() * r2
-                        } else {
-                            0.0
-                        }
-                    };
-                    part(pi, 1.0 / (rhoi * rhoi)) + part(pj, 1.0 / (rhoj * rhoj))
-                };
-                term += big_r * fij;
-            }
-            acc -= mj * term * grad;
-            visc_power += mj * visc * vij.dot(grad);
+    let Packed {
+        x: xi,
+        v: vi,
+        rho: rhoi,
+        p_rho2: pi_r2,
+        c: ci,
+        ..
+    } = all[i];
+    let (mut acc, mut visc_power) = (DVec2::ZERO, 0.0);
+    for &j in neighbours {
+        let pj = &all[j as usize];
+        let xij = xi - pj.x;
+        let r = xij.length();
+        let grad = k.grad(xij, r);
+        let (rhoj, mj, pj_r2, cj) = (pj.rho, pj.m, pj.p_rho2, pj.c);
+        let mut term = pi_r2 + pj_r2;
+        let vij = vi - pj.v;
+        let vx = vij.dot(xij);
+        let mut visc = 0.0;
+        if vx < 0.0 {
+            // Monaghan's artificial viscosity Pi_ij = (-alpha cbar phi + beta phi^2) / rhobar.
+            let phi = prm.h * vx / (r * r + prm.eta2);
+            let cbar = 0.5 * (ci + cj);
+            visc = (-prm.alpha * cbar * phi + prm.beta * phi * phi) / (0.5 * (rhoi + rhoj));
+            term += visc;
         }
-        (acc, visc_power)
+        if ART {
+            // R f_ij^n: R = eps (|p_i|/rho_i^2 + |p_j|/rho_j^2) over the negative
+            // pressures, or eps_+ (p_i/rho_i^2 + p_j/rho_j^2) when both are positive.
+            let fij = int_pow(k.w(r) * prm.inv_w_ds, prm.exponent);
+            let big_r = if pi_r2 > 0.0 && pj_r2 > 0.0 {
+                prm.epsilon_positive * (pi_r2 + pj_r2)
+            } else {
+                prm.epsilon * ((-pi_r2).max(0.0) + (-pj_r2).max(0.0))
+            };
+            term += big_r * fij;
+        }
+        acc -= mj * term * grad;
+        visc_power += mj * visc * vij.dot(grad);
     }
+    (acc, visc_power)
 }

@@ -15,9 +15,11 @@ pub mod ghost_walls;
 pub mod integrate;
 pub mod mls;
 pub mod neighbour_grid;
+pub mod packed;
 pub mod probe;
 pub mod reinitialise;
 pub mod snapshots;
+pub mod sort_particles;
 pub mod vtk_frames;
 
 use sph_core::StageRegistry;

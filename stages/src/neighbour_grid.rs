@@ -7,6 +7,7 @@
 //! the same whatever the thread count. The lists are reused by every later stage of the
 //! step.
 
+use crate::sort_particles::{counting_sort, sort_by_cell, SortScratch};
 use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -16,8 +17,10 @@ use sph_core::stage::{Stage, StepError};
 use sph_core::world::{archetype, column, column_mut, ensure_component, Joined};
 use sph_core::StageRegistry;
 
-/// Fluid particles per parallel block when building the lists.
-const BLOCK: usize = 1024;
+/// Fluid particles per parallel block when building the lists (a power of two, so
+/// [`Neighbours::of`] finds a particle's block with a shift).
+const BLOCK_BITS: usize = 10;
+const BLOCK: usize = 1 << BLOCK_BITS;
 
 #[derive(Debug, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -25,11 +28,19 @@ pub struct Params {
     /// Also store each fluid particle's neighbour count (for frames and statistics).
     /// Default true.
     pub count: bool,
+    /// Reorder the fluid particles by grid cell every this many calls (0: never), so
+    /// neighbours are near in memory (`sort_particles.rs`). Changes sums only by
+    /// round-off (the order of terms); results stay identical for any thread count.
+    /// Default 20.
+    pub sort_every: u32,
 }
 
 impl Default for Params {
     fn default() -> Self {
-        Self { count: true }
+        Self {
+            count: true,
+            sort_every: 20,
+        }
     }
 }
 
@@ -37,12 +48,22 @@ pub fn register(registry: &mut StageRegistry) {
     registry.register(
         "neighbour_grid",
         "cell-linked list; neighbour lists of the fluid particles",
-        |p: Params| Ok(NeighbourGrid { count: p.count }),
+        |p: Params| {
+            Ok(NeighbourGrid {
+                count: p.count,
+                sort_every: p.sort_every,
+                calls: 0,
+                sort: SortScratch::default(),
+            })
+        },
     );
 }
 
 pub struct NeighbourGrid {
     count: bool,
+    sort_every: u32,
+    calls: u64,
+    sort: SortScratch,
 }
 
 /// A uniform grid of cells over the domain, each listing the particles inside it.
@@ -52,12 +73,29 @@ pub struct CellGrid {
     cell: f64,
     nx: usize,
     ny: usize,
-    /// `start[c]..start[c+1]` indexes `particles` for cell c.
+    /// `start[c]..start[c+1]` indexes `particles` (and `xs`) for cell c.
     start: Vec<u32>,
+    /// Joint indices, cell by cell, ascending within a cell.
     particles: Vec<u32>,
+    /// x and y of the positions in the order of `particles` (separate arrays), so a
+    /// candidate scan reads contiguous memory and its distance test vectorises.
+    xs: Vec<f64>,
+    ys: Vec<f64>,
+    /// Each particle's cell (scratch kept between steps).
+    cells: Vec<u32>,
 }
 
 impl CellGrid {
+    /// Sets the grid geometry: cells of size `cell` covering `domain`.
+    fn shape(&mut self, domain: (DVec2, DVec2), cell: f64) {
+        self.origin = domain.0;
+        self.cell = cell;
+        let extent = domain.1 - domain.0;
+        self.nx = ((extent.x / cell).ceil() as usize).max(1);
+        self.ny = ((extent.y / cell).ceil() as usize).max(1);
+    }
+
+    #[inline(always)]
     fn cell_of(&self, x: DVec2) -> (usize, usize) {
         let c = ((x - self.origin) / self.cell).floor();
         (
@@ -66,36 +104,54 @@ impl CellGrid {
         )
     }
 
+    #[inline(always)]
+    fn index_of(&self, x: DVec2) -> usize {
+        let (cx, cy) = self.cell_of(x);
+        cy * self.nx + cx
+    }
+
     /// Rebuilds the grid for `positions` (joint numbering) by a counting sort, so each
-    /// cell lists its particles in ascending index order.
-    fn rebuild(&mut self, positions: Joined<Position>, domain: (DVec2, DVec2), cell: f64) {
-        self.origin = domain.0;
-        self.cell = cell;
-        let extent = domain.1 - domain.0;
-        self.nx = ((extent.x / cell).ceil() as usize).max(1);
-        self.ny = ((extent.y / cell).ceil() as usize).max(1);
+    /// cell lists its particles in ascending index order. Reuses its buffers.
+    fn rebuild(&mut self, positions: Joined<Position>) {
         let n = positions.len();
-        let cells: Vec<u32> = (0..n)
+        let mut cells = std::mem::take(&mut self.cells);
+        cells.resize(n, 0);
+        cells
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(j, c)| *c = self.index_of(positions.get(j as u32).0) as u32);
+        counting_sort(
+            &cells,
+            self.nx * self.ny,
+            &mut self.start,
+            &mut self.particles,
+        );
+        self.cells = cells;
+        self.xs.resize(n, 0.0);
+        self.ys.resize(n, 0.0);
+        (&mut self.xs[..], &mut self.ys[..], &self.particles[..])
             .into_par_iter()
-            .map(|j| {
-                let (cx, cy) = self.cell_of(positions.get(j as u32).0);
-                (cy * self.nx + cx) as u32
-            })
-            .collect();
-        self.start.clear();
-        self.start.resize(self.nx * self.ny + 1, 0);
-        for &c in &cells {
-            self.start[c as usize + 1] += 1;
-        }
-        for c in 0..self.nx * self.ny {
-            self.start[c + 1] += self.start[c];
-        }
-        self.particles.resize(n, 0);
-        let mut fill = self.start.clone();
-        for (j, &c) in cells.iter().enumerate() {
-            self.particles[fill[c as usize] as usize] = j as u32;
-            fill[c as usize] += 1;
-        }
+            .for_each(|(x, y, &j)| {
+                let p = positions.get(j).0;
+                (*x, *y) = (p.x, p.y);
+            });
+    }
+
+    /// The three index ranges (into `particles` / `xs`) of the 3x3 cells around `x`,
+    /// in the fixed order (rows bottom to top).
+    #[inline(always)]
+    fn ranges_near(&self, x: DVec2) -> [std::ops::Range<usize>; 3] {
+        let (cx, cy) = self.cell_of(x);
+        let (x0, x1) = (cx.saturating_sub(1), (cx + 1).min(self.nx - 1));
+        let row = |y: usize| {
+            let r = y * self.nx;
+            self.start[r + x0] as usize..self.start[r + x1 + 1] as usize
+        };
+        [
+            if cy > 0 { row(cy - 1) } else { 0..0 },
+            row(cy),
+            if cy + 1 < self.ny { row(cy + 1) } else { 0..0 },
+        ]
     }
 
     /// Calls `f(j)` for every particle in the 3x3 cells around `x`, in the fixed order.
@@ -104,37 +160,62 @@ impl CellGrid {
         if self.start.is_empty() {
             return;
         }
-        let (cx, cy) = self.cell_of(x);
-        for y in cy.saturating_sub(1)..=(cy + 1).min(self.ny - 1) {
-            let row = y * self.nx;
-            let lo = self.start[row + cx.saturating_sub(1)] as usize;
-            let hi = self.start[row + (cx + 1).min(self.nx - 1) + 1] as usize;
-            for &j in &self.particles[lo..hi] {
+        for range in self.ranges_near(x) {
+            for &j in &self.particles[range] {
                 f(j);
             }
         }
     }
 }
 
-/// The neighbour lists of one step.
+/// Neighbour lists of [`BLOCK`] consecutive fluid particles.
+#[derive(Default)]
+pub struct NeighbourBlock {
+    /// `list[offsets[k]..offsets[k+1]]` are the neighbours of the block's k-th particle.
+    offsets: Vec<u32>,
+    list: Vec<u32>,
+}
+
+/// The neighbour lists of one step, kept in blocks of [`BLOCK`] particles that are
+/// built in parallel and reused from step to step (no per-step allocation once the
+/// lists have reached their size).
 #[derive(Default)]
 pub struct Neighbours {
     pub n_fluid: usize,
     pub n_ghost: usize,
     /// Kernel support radius the lists were built for [m].
     pub support: f64,
-    /// `list[offsets[i]..offsets[i+1]]` are fluid particle i's neighbours (self excluded).
-    pub offsets: Vec<u32>,
-    pub list: Vec<u32>,
+    blocks: Vec<NeighbourBlock>,
     /// The cell grid, for point queries (sensors, gauges).
     pub grid: CellGrid,
 }
 
 impl Neighbours {
-    /// Neighbours of fluid particle `i`.
+    /// Neighbours of fluid particle `i` (joint numbering, self excluded).
     #[inline(always)]
     pub fn of(&self, i: usize) -> &[u32] {
-        &self.list[self.offsets[i] as usize..self.offsets[i + 1] as usize]
+        let b = &self.blocks[i >> BLOCK_BITS];
+        let k = i & (BLOCK - 1);
+        &b.list[b.offsets[k] as usize..b.offsets[k + 1] as usize]
+    }
+
+    /// Total number of neighbour pairs (i, j) in the lists: the interactions one
+    /// pass over all neighbours evaluates.
+    pub fn interactions(&self) -> usize {
+        self.blocks.iter().map(|b| b.list.len()).sum()
+    }
+
+    /// Bytes held by the lists and the grid (capacity), for memory accounting.
+    pub fn heap_bytes(&self) -> usize {
+        let blocks: usize = self
+            .blocks
+            .iter()
+            .map(|b| 4 * (b.offsets.capacity() + b.list.capacity()))
+            .sum();
+        let g = &self.grid;
+        blocks
+            + 4 * (g.start.capacity() + g.particles.capacity() + g.cells.capacity())
+            + 8 * (g.xs.capacity() + g.ys.capacity())
     }
 }
 
@@ -160,7 +241,25 @@ impl Stage for NeighbourGrid {
 }
 
 impl NeighbourGrid {
-    fn build(&self, sim: &Sim, nb: &mut Neighbours) -> Result<(), StepError> {
+    fn build(&mut self, sim: &mut Sim, nb: &mut Neighbours) -> Result<(), StepError> {
+        let support = sim.constants.support();
+        // The grid must also cover ghosts, which lie up to one support outside the walls.
+        let (lo, hi) = sim.constants.domain;
+        let pad = DVec2::splat(support);
+        nb.grid.shape((lo - pad, hi + pad), support);
+        if self.sort_every > 0 && self.calls.is_multiple_of(self.sort_every as u64) {
+            let grid = &nb.grid;
+            let sorted = sort_by_cell(
+                &sim.world,
+                grid.nx * grid.ny,
+                |x| grid.index_of(x),
+                &mut self.sort,
+            )?;
+            if !sorted {
+                sim.diagnostics.insert("cell_sort_skipped".into(), 1.0);
+            }
+        }
+        self.calls += 1;
         let Some(fluid) = archetype::<Fluid>(&sim.world) else {
             return Ok(());
         };
@@ -168,60 +267,67 @@ impl NeighbourGrid {
         let fpos = column::<Position>(fluid)?;
         let gpos = ghost.map(column::<Position>).transpose()?;
         let positions = Joined::new(&fpos[..], gpos.as_deref().unwrap_or(&[]));
-        let support = sim.constants.support();
         nb.n_fluid = fpos.len();
         nb.n_ghost = positions.len() - fpos.len();
         nb.support = support;
-        // The grid must also cover ghosts, which lie up to one support outside the walls.
-        let (lo, hi) = sim.constants.domain;
-        let pad = DVec2::splat(support);
-        nb.grid.rebuild(positions, (lo - pad, hi + pad), support);
+        nb.grid.rebuild(positions);
 
         let fpos: &[Position] = &fpos;
         let r2max = support * support;
         let grid = &nb.grid;
         let n = nb.n_fluid;
-        let blocks: Vec<(Vec<u32>, Vec<u32>)> = (0..n.div_ceil(BLOCK))
-            .into_par_iter()
-            .map(|b| {
-                let mut counts = Vec::with_capacity(BLOCK);
-                let mut list = Vec::with_capacity(BLOCK * 24);
-                let first = b * BLOCK;
-                for (i, xi) in fpos
-                    .iter()
-                    .enumerate()
-                    .take(((b + 1) * BLOCK).min(n))
-                    .skip(first)
-                {
-                    let xi = xi.0;
-                    let before = list.len();
-                    grid.for_each_near(xi, |j| {
-                        if j as usize != i && (xi - positions.get(j).0).length_squared() < r2max {
-                            list.push(j);
-                        }
-                    });
-                    counts.push((list.len() - before) as u32);
+        nb.blocks
+            .resize_with(n.div_ceil(BLOCK), NeighbourBlock::default);
+        nb.blocks.par_iter_mut().enumerate().for_each(|(b, block)| {
+            let range = b * BLOCK..((b + 1) * BLOCK).min(n);
+            block.offsets.clear();
+            block.offsets.push(0);
+            block.list.clear();
+            for i in range {
+                let xi = fpos[i].0;
+                let ranges = grid.ranges_near(xi);
+                // Branch-free append: write every candidate, keep it (advance the
+                // length) if it is within the support and not i itself.
+                let base = block.list.len();
+                let total: usize = ranges.iter().map(|r| r.len()).sum();
+                // Grow by an eighth rather than by doubling: the lists keep their
+                // capacity from step to step, so doubling would hold up to twice the
+                // memory the lists need.
+                let need = base + total;
+                if need > block.list.capacity() {
+                    let more = (need - block.list.len()).max(block.list.len() / 8);
+                    block.list.reserve_exact(more);
                 }
-                (counts, list)
-            })
-            .collect();
-        nb.offsets.clear();
-        nb.offsets.reserve(n + 1);
-        nb.offsets.push(0);
-        nb.list.clear();
-        let mut total = 0u32;
-        for (counts, list) in &blocks {
-            for c in counts {
-                total += c;
-                nb.offsets.push(total);
+                block.list.resize(need, 0);
+                // A plain slice, so the loop keeps its pointer in a register.
+                let out = &mut block.list[base..];
+                let mut kept = 0;
+                for cand in ranges {
+                    let (xs, ys) = (&grid.xs[cand.clone()], &grid.ys[cand.clone()]);
+                    let ids = &grid.particles[cand];
+                    for ((&x, &y), &j) in xs.iter().zip(ys).zip(ids) {
+                        let (dx, dy) = (xi.x - x, xi.y - y);
+                        let keep = (dx * dx + dy * dy < r2max) & (j as usize != i);
+                        out[kept] = j;
+                        kept += keep as usize;
+                    }
+                }
+                let len = base + kept;
+                block.list.truncate(len);
+                block.offsets.push(len as u32);
             }
-            nb.list.extend_from_slice(list);
-        }
+        });
+        nb.blocks.truncate(n.div_ceil(BLOCK));
         if self.count {
             let mut counts = column_mut::<NeighbourCount>(fluid)?;
-            for (i, c) in counts.iter_mut().enumerate() {
-                c.0 = nb.offsets[i + 1] - nb.offsets[i];
-            }
+            counts
+                .par_chunks_mut(BLOCK)
+                .zip(nb.blocks.par_iter())
+                .for_each(|(counts, block)| {
+                    for (c, w) in counts.iter_mut().zip(block.offsets.windows(2)) {
+                        c.0 = w[1] - w[0];
+                    }
+                });
         }
         Ok(())
     }

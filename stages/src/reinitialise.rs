@@ -10,9 +10,10 @@ use crate::ghost_walls::refresh_ghost_density;
 use crate::integrate::HalfDensity;
 use crate::mls::MlsSums;
 use crate::neighbour_grid::Neighbours;
+use crate::packed::{with_packed, Fill, Packed};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use sph_core::components::{Density, Mass, Position};
+use sph_core::components::Density;
 use sph_core::kernel::Kernel;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
@@ -65,51 +66,66 @@ impl Stage for Reinitialise {
     }
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
-        let Some(nb) = sim.resources.get::<Neighbours>() else {
+        let filtered = &mut self.filtered;
+        let filter = self.filter;
+        let done = with_packed(sim, Fill::Basic, |sim, _, all| {
+            let Some(nb) = sim.resources.get::<Neighbours>() else {
+                return Ok(false);
+            };
+            let c = &sim.constants;
+            filtered.resize(nb.n_fluid, 0.0);
+            with_kernel!(c.kernel, c.h, |k| {
+                let w0 = k.w(0.0);
+                filtered.par_iter_mut().enumerate().for_each(|(i, out)| {
+                    let Packed {
+                        x: xi,
+                        m: mi,
+                        rho: rhoi,
+                        ..
+                    } = all[i];
+                    if filter == Filter::Mls {
+                        let mut sums = MlsSums::default();
+                        sums.add(glam::DVec2::ZERO, w0, mi, rhoi);
+                        for &j in nb.of(i) {
+                            let pj = &all[j as usize];
+                            let d = xi - pj.x;
+                            sums.add(d, k.w(d.length()), pj.m, pj.rho);
+                        }
+                        *out = sums.mls();
+                        return;
+                    }
+                    let (mut num, mut den) = (mi * w0, mi / rhoi * w0);
+                    for &j in nb.of(i) {
+                        let pj = &all[j as usize];
+                        let w = k.w((xi - pj.x).length());
+                        num += pj.m * w;
+                        den += pj.m / pj.rho * w;
+                    }
+                    *out = num / den;
+                });
+            });
+            Ok(true)
+        })?;
+        if done != Some(true) {
             return Ok(());
-        };
+        }
         let Some(particles) = Particles::of(&sim.world) else {
             return Ok(());
         };
-        {
-            let (x, rho, m) = (
-                particles.joined::<Position>()?,
-                particles.joined::<Density>()?,
-                particles.joined::<Mass>()?,
-            );
-            let (x, rho, m) = (x.view(), rho.view(), m.view());
-            let c = &sim.constants;
-            let filter = self.filter;
-            self.filtered.resize(x.fluid.len(), 0.0);
-            with_kernel!(c.kernel, c.h, |k| {
-                let w0 = k.w(0.0);
-                self.filtered
-                    .par_iter_mut()
-                    .enumerate()
-                    .for_each(|(i, out)| {
-                        let xi = x.fluid[i].0;
-                        let mut sums = MlsSums::default();
-                        sums.add(glam::DVec2::ZERO, w0, m.fluid[i].0, rho.fluid[i].0);
-                        for &j in nb.of(i) {
-                            let d = xi - x.get(j).0;
-                            sums.add(d, k.w(d.length()), m.get(j).0, rho.get(j).0);
-                        }
-                        *out = match filter {
-                            Filter::Shepard => sums.shepard(),
-                            Filter::Mls => sums.mls(),
-                        };
-                    });
-            });
-        }
         // Shift the leapfrog's half-step density by the same correction.
         let mut rho = particles.fluid_mut::<Density>()?;
         let mut half = particles.fluid.get::<&mut HalfDensity>();
-        for (i, r) in rho.iter_mut().enumerate() {
-            let delta = self.filtered[i] - r.0;
-            r.0 = self.filtered[i];
-            if let Some(h) = half.as_deref_mut() {
-                h[i].0 += delta;
-            }
+        let filtered = &self.filtered[..];
+        match half.as_deref_mut() {
+            Some(half) => (&mut rho[..], half, filtered)
+                .into_par_iter()
+                .for_each(|(r, h, &f)| {
+                    h.0 += f - r.0;
+                    r.0 = f;
+                }),
+            None => (&mut rho[..], filtered)
+                .into_par_iter()
+                .for_each(|(r, &f)| r.0 = f),
         }
         drop((rho, half));
         refresh_ghost_density(sim)

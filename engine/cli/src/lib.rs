@@ -1,6 +1,8 @@
 //! The `engine` command line. A plugin crate builds its own binary with
 //! `engine::main_with(registry)` after registering its stages.
 
+pub mod bench;
+
 use clap::{Parser, Subcommand};
 use sph_core::overrides::Override;
 use sph_core::runner::{run, RunError, RunOptions};
@@ -26,6 +28,8 @@ pub struct Cli {
 pub enum Command {
     /// List the registered stages.
     Stages,
+    /// Benchmark the dam break over sizes and thread counts (bench.csv, bench.md).
+    Bench(bench::BenchArgs),
 }
 
 /// Running one scenario.
@@ -63,6 +67,13 @@ pub fn main_with(registry: StageRegistry) -> ExitCode {
             }
             ExitCode::SUCCESS
         }
+        Some(Command::Bench(args)) => match bench::main(&args) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(message) => {
+                eprintln!("error: {message}");
+                ExitCode::FAILURE
+            }
+        },
         None => match run_scenario(&cli.run, &registry) {
             Ok(()) => ExitCode::SUCCESS,
             Err(message) => {

@@ -1,6 +1,6 @@
 //! Writing the fluid particles' current state as a ParaView frame.
 
-use crate::components::{Density, Fluid, NeighbourCount, Position, Pressure, Velocity};
+use crate::components::{Density, Fluid, NeighbourCount, ParticleId, Position, Pressure, Velocity};
 use crate::output::vtk::{write_vtp, FrameFields};
 use crate::sim::Sim;
 use crate::stage::StepError;
@@ -8,8 +8,9 @@ use crate::world::{archetype, column};
 use glam::DVec2;
 use std::path::Path;
 
-/// Writes the fluid particles (position, velocity, density, pressure and, where the
-/// neighbour grid stage counts them, neighbour count) to a `.vtp` file, atomically.
+/// Writes the fluid particles (position, velocity, density, pressure, `particle_id`
+/// and, where the neighbour grid stage counts them, neighbour count) to a `.vtp` file,
+/// atomically.
 pub fn write_fluid_frame(sim: &Sim, path: &Path) -> Result<(), StepError> {
     let Some(arch) = archetype::<Fluid>(&sim.world) else {
         return Ok(());
@@ -26,13 +27,20 @@ pub fn write_fluid_frame(sim: &Sim, path: &Path) -> Result<(), StepError> {
         .get::<&NeighbourCount>()
         .map(|c| c.iter().map(|n| n.0).collect())
         .unwrap_or_default();
+    // Particles are reordered by the neighbour grid's cell sort, so the id (creation
+    // index) is what follows a particle from frame to frame.
+    let ids: Vec<f64> = arch
+        .get::<&ParticleId>()
+        .map(|c| c.iter().map(|id| f64::from(id.0)).collect())
+        .unwrap_or_default();
+    let extras = [("particle_id", &ids[..])];
     let fields = FrameFields {
         positions: &positions,
         velocity: &velocity,
         density: &density,
         pressure: &pressure,
         neighbours: &neighbours,
-        extra_scalars: &[],
+        extra_scalars: if ids.is_empty() { &[] } else { &extras },
     };
     write_vtp(path, &fields).map_err(|e| StepError::output(path, e))
 }

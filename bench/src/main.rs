@@ -1,0 +1,264 @@
+//! `sph-bench`: `engine bench` plus a side-by-side run of the peer salva2d (DFSPH).
+//!
+//!   cargo run --release -p sph-bench -- bench [engine bench options]
+//!   cargo run --release -p sph-bench -- peer [--sizes 5k,20k] [--threads 2] [--end-time 0.62]
+//!
+//! `peer` runs Martin & Moyce's n^2 = 2 column (a = 0.3 m wide, 0.6 m high, in the dam
+//! break's 3.22 m tank; the geometry of tests/tests/dam_break.rs) in both engines at
+//! the same particle spacing and to the same physical end time, and prints wall time
+//! to solution and the surge-front error against Martin & Moyce (a = 2.25 in series,
+//! tests/data). What is not like for like is listed in `peer.md` and
+//! docs/performance.md.
+
+use clap::{Parser, Subcommand};
+use engine::bench::{parse_count, run_child, BenchArgs, Case, Measurement};
+use salva2d::kernel::CubicSplineKernel;
+use salva2d::math::Vector;
+use salva2d::object::interaction_groups::InteractionGroups;
+use salva2d::object::{Boundary, Fluid};
+use salva2d::solver::{ArtificialViscosity, DFSPHSolver};
+use salva2d::LiquidWorld;
+use sph_tests::support::{interpolate, reference};
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+/// Counts heap bytes for the benchmark (engine::bench::CountingAlloc).
+#[global_allocator]
+static ALLOC: engine::bench::CountingAlloc = engine::bench::CountingAlloc;
+
+#[derive(Parser)]
+#[command(name = "sph-bench")]
+struct Cli {
+    #[command(subcommand)]
+    command: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// The engine's own benchmark (same options as `engine bench`).
+    Bench(BenchArgs),
+    /// Our engine against salva2d on Martin & Moyce's column.
+    Peer(PeerArgs),
+}
+
+#[derive(clap::Args, Clone)]
+struct PeerArgs {
+    /// Fluid particle counts; the column is twice as high as wide, so N particles
+    /// means ParticlesAcross(sqrt(N/2)).
+    #[arg(long, value_delimiter = ',', default_value = "5k,20k")]
+    sizes: Vec<String>,
+    /// Worker threads for both engines.
+    #[arg(long, default_value_t = 2)]
+    threads: usize,
+    /// Physical end time [s].
+    #[arg(long, default_value_t = 0.62)]
+    end_time: f64,
+    /// The scenario our engine runs (the column is set by overrides).
+    #[arg(long, default_value = "scenarios/dam_break.ron")]
+    scenario: PathBuf,
+    /// Folder for peer.md.
+    #[arg(long, default_value = "out/bench")]
+    out: PathBuf,
+}
+
+/// Column width a [m] and height 2a: Martin & Moyce's n^2 = 2.
+const A: f64 = 0.3;
+const TANK: (f64, f64) = (3.22, 1.8);
+const G: f64 = 9.81;
+const RHO0: f64 = 1000.0;
+
+/// Martin & Moyce (1952), n^2 = 2, a = 2.25 in: (T, Z) with T = t sqrt(2g/a), Z = z/a.
+fn martin_moyce() -> Vec<(f64, f64)> {
+    reference("martin_moyce_1952_surge_n2-2_a2.25in_pysph.csv")
+}
+
+/// Front error against the data over 1 <= T <= T(end): (mean |Z/Z_data - 1|, the
+/// signed error at the last data point), with `front` given as (t [s], x [m]).
+fn front_error(front: &[(f64, f64)], end_time: f64) -> (f64, f64, f64) {
+    let scale = (2.0 * G / A).sqrt();
+    let sim: Vec<(f64, f64)> = front.iter().map(|&(t, x)| (t * scale, x / A)).collect();
+    let t_end = end_time * scale;
+    let errs: Vec<(f64, f64)> = martin_moyce()
+        .into_iter()
+        .filter(|p| p.0 >= 1.0 && p.0 <= t_end)
+        .map(|(t, z)| (t, interpolate(&sim, t) / z - 1.0))
+        .collect();
+    let mean = errs.iter().map(|e| e.1.abs()).sum::<f64>() / errs.len().max(1) as f64;
+    let last = errs.last().copied().unwrap_or((f64::NAN, f64::NAN));
+    (mean, last.0, last.1)
+}
+
+struct PeerResult {
+    particles: usize,
+    wall: f64,
+    steps: u64,
+    front: Vec<(f64, f64)>,
+}
+
+/// salva2d on the same column: DFSPH, particles of radius ds/2 on the same lattice,
+/// three layers of boundary particles (Akinci) along floor and side walls, artificial
+/// viscosity. Front = largest x of fluid with y < ds, plus ds/2 (our probe's rule).
+fn run_salva(across: usize, threads: usize, end_time: f64) -> Result<PeerResult, String> {
+    let ds = A / across as f64;
+    let r = (ds / 2.0) as f32;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| e.to_string())?;
+    pool.install(|| {
+        let mut world = LiquidWorld::new(
+            DFSPHSolver::<CubicSplineKernel, CubicSplineKernel>::new(),
+            r,
+            2.0,
+            1.0,
+        );
+        let rows = 2 * across;
+        let mut fluid_points = Vec::with_capacity(across * rows);
+        for j in 0..rows {
+            for i in 0..across {
+                fluid_points.push(Vector::new(
+                    ((i as f64 + 0.5) * ds) as f32,
+                    ((j as f64 + 0.5) * ds) as f32,
+                ));
+            }
+        }
+        let particles = fluid_points.len();
+        let mut fluid = Fluid::new(fluid_points, r, RHO0 as f32, InteractionGroups::default());
+        fluid
+            .nonpressure_forces
+            .push(Box::new(ArtificialViscosity::new(0.03, 0.0)));
+        world.add_fluid(fluid);
+        let mut wall = Vec::new();
+        let (nx, ny) = ((TANK.0 / ds).ceil() as i64, (TANK.1 / ds).ceil() as i64);
+        for layer in 0..3 {
+            let off = (layer as f64 + 0.5) * ds;
+            for i in -3..nx + 3 {
+                wall.push(Vector::new(((i as f64 + 0.5) * ds) as f32, (-off) as f32));
+            }
+            for j in 0..ny {
+                let y = ((j as f64 + 0.5) * ds) as f32;
+                wall.push(Vector::new((-off) as f32, y));
+                wall.push(Vector::new((TANK.0 + off) as f32, y));
+            }
+        }
+        world.add_boundary(Boundary::new(wall, InteractionGroups::default()));
+        let gravity = Vector::new(0.0, -G as f32);
+        // Frames short enough that salva's CFL step never needs more than its 10
+        // substeps per frame (v <= 2 sqrt(2 g 0.6) ~ 7 m/s).
+        let frame = (0.4 * ds / 7.0 * 10.0).min(0.005);
+        let start = Instant::now();
+        let (mut t, mut steps, mut front) = (0.0, 0u64, Vec::new());
+        while t < end_time - 1e-12 {
+            let dt = frame.min(end_time - t);
+            world.step(dt as f32, &gravity);
+            steps += world.counters.nsubsteps as u64;
+            t += dt;
+            let x_front = world
+                .fluids()
+                .iter()
+                .flat_map(|(_, f)| f.positions.iter())
+                .filter(|p| (p.y as f64) < ds)
+                .map(|p| p.x as f64)
+                .fold(f64::NEG_INFINITY, f64::max);
+            front.push((t, x_front + 0.5 * ds));
+        }
+        Ok(PeerResult {
+            particles,
+            wall: start.elapsed().as_secs_f64(),
+            steps,
+            front,
+        })
+    })
+}
+
+fn peer(args: &PeerArgs) -> Result<(), String> {
+    std::fs::create_dir_all(&args.out).map_err(|e| e.to_string())?;
+    let bench = BenchArgs {
+        sizes: Vec::new(),
+        threads: vec![args.threads],
+        steps: 0,
+        repeats: 1,
+        time_sizes: Vec::new(),
+        end_time: args.end_time,
+        scenario: args.scenario.clone(),
+        sets: Vec::new(),
+        out: args.out.clone(),
+        child: None,
+    };
+    let mut table = String::from(
+        "| particles | ds [mm] | engine | steps | wall to t [s] | wall ratio (salva2d / ours) | mean front error | front error at last data point |\n|---:|---:|---|---:|---:|---:|---:|---:|\n",
+    );
+    for size in &args.sizes {
+        let n = parse_count(size)?;
+        let across = ((n / 2) as f64).sqrt().round() as usize;
+        let ds = A / across as f64;
+        let blocks = format!("fluid_blocks=[(min: (0.0, 0.0), size: ({A}, {}))]", 2.0 * A);
+        let res = format!("resolution=ParticlesAcross({across})");
+        let ours: Measurement = run_child(
+            Case {
+                particles: n,
+                threads: args.threads,
+                steps: 0,
+                end_time: args.end_time,
+            },
+            &bench,
+            &[&blocks, &res, "pipeline.snapshots.times=[]"],
+            &format!("peer-{size}"),
+        )?;
+        eprintln!(
+            "ours: {} particles to t = {} s in {:.2} s ({} steps)",
+            ours.particles, ours.simulated_time, ours.wall_seconds, ours.steps
+        );
+        let theirs = run_salva(across, args.threads, args.end_time)?;
+        eprintln!(
+            "salva2d: {} particles to t = {} s in {:.2} s ({} substeps)",
+            theirs.particles, args.end_time, theirs.wall, theirs.steps
+        );
+        let (e_ours, t_last, last_ours) = front_error(&ours.front, args.end_time);
+        let (e_salva, _, last_salva) = front_error(&theirs.front, args.end_time);
+        let ratio = theirs.wall / ours.wall_seconds;
+        let _ = writeln!(
+            table,
+            "| {} | {:.2} | ours (WCSPH, f64) | {} | {:.2} | {ratio:.2} | {:.1} % | {:+.1} % (T = {t_last:.2}) |",
+            ours.particles,
+            1e3 * ds,
+            ours.steps,
+            ours.wall_seconds,
+            100.0 * e_ours,
+            100.0 * last_ours
+        );
+        let _ = writeln!(
+            table,
+            "| {} | {:.2} | salva2d 0.11 (DFSPH, f32) | {} | {:.2} | | {:.1} % | {:+.1} % |",
+            theirs.particles,
+            1e3 * ds,
+            theirs.steps,
+            theirs.wall,
+            100.0 * e_salva,
+            100.0 * last_salva
+        );
+    }
+    let md = format!(
+        "# Peer comparison: salva2d\n\nMartin & Moyce column (a = {A} m, n^2 = 2) in the {} m x {} m tank, to t = {} s on {} thread(s). Front error: |Z/Z_data - 1| averaged over the data points with 1 <= T <= T(t_end) (a = 2.25 in series, no start delay; T = t sqrt(2g/a)).\n\n{table}\nNot like for like: salva2d is DFSPH (incompressible, larger steps; 'steps' counts its substeps), f32 only, with Akinci boundary particles and its own artificial viscosity (coefficient 0.03, not the same formula); ours is WCSPH in f64 with mirrored ghosts, Shepard filtering every step and artificial pressure, and its time includes probes and outputs at default rates.\n",
+        TANK.0, TANK.1, args.end_time, args.threads
+    );
+    std::fs::write(args.out.join("peer.md"), &md).map_err(|e| e.to_string())?;
+    println!("{md}");
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let result = match Cli::parse().command {
+        Cmd::Bench(args) => engine::bench::main(&args),
+        Cmd::Peer(args) => peer(&args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,607 @@
+//! `engine bench`: the dam break at several sizes and thread counts, each run in a
+//! child process of its own (so its peak memory is its own), reported as `bench.csv`
+//! and `bench.md` (docs/performance.md explains the columns).
+//!
+//! A run either takes a fixed number of steps (a `BenchStop` stage appended to the
+//! pipeline ends it after `--steps` steps) or runs to a fixed physical time
+//! (`--time-sizes`, `--end-time`). Outputs are on at the scenario's default rates, so
+//! their cost is part of the figures; a run's output folder is deleted afterwards.
+//! Benchmarks report; they never assert times.
+
+use serde::{Deserialize, Serialize};
+use sph_core::components::Fluid;
+use sph_core::overrides::Override;
+use sph_core::runner::{run_keeping_state, RunOptions};
+use sph_core::sim::Sim;
+use sph_core::stage::{Stage, StepError};
+use sph_core::world::count;
+use sph_core::Scenario;
+use sph_stages::neighbour_grid::Neighbours;
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// A counting global allocator: live and peak heap bytes, independent of how the
+/// system allocator returns memory to the OS. The `engine` and `sph-bench` binaries
+/// install it (`#[global_allocator]` in their main.rs); a binary that does not
+/// reports heap figures of 0. Cost: two relaxed atomic operations per allocation,
+/// and the engine does not allocate per step.
+pub struct CountingAlloc;
+
+static LIVE: AtomicUsize = AtomicUsize::new(0);
+static PEAK: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for CountingAlloc {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        // SAFETY: forwarded unchanged to the system allocator.
+        let p = unsafe { System.alloc(layout) };
+        if !p.is_null() {
+            let live = LIVE.fetch_add(layout.size(), Ordering::Relaxed) + layout.size();
+            PEAK.fetch_max(live, Ordering::Relaxed);
+        }
+        p
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: forwarded unchanged to the system allocator.
+        unsafe { System.dealloc(ptr, layout) };
+        LIVE.fetch_sub(layout.size(), Ordering::Relaxed);
+    }
+}
+
+/// (live, peak) heap bytes counted by [`CountingAlloc`] (zeros when not installed).
+pub fn heap_bytes() -> (usize, usize) {
+    (LIVE.load(Ordering::Relaxed), PEAK.load(Ordering::Relaxed))
+}
+
+/// Options of `engine bench`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct BenchArgs {
+    /// Fluid particle counts, with k/M suffixes. The dam break's column is 2:1, so
+    /// N particles means ParticlesAcross(sqrt(2 N)).
+    #[arg(long, value_delimiter = ',', default_value = "5k,20k,80k,320k,1.28M")]
+    pub sizes: Vec<String>,
+    /// Worker-thread counts.
+    #[arg(long, value_delimiter = ',', default_value = "1,2")]
+    pub threads: Vec<usize>,
+    /// Steps per fixed-step run.
+    #[arg(long, default_value_t = 100)]
+    pub steps: u64,
+    /// Runs per size and thread count; the table shows the median wall time.
+    #[arg(long, default_value_t = 1)]
+    pub repeats: usize,
+    /// Sizes also run to `--end-time` on the largest thread count ("none" for none).
+    #[arg(long, value_delimiter = ',', default_value = "5k,20k")]
+    pub time_sizes: Vec<String>,
+    /// Physical end time of the `--time-sizes` runs [s].
+    #[arg(long, default_value_t = 0.62)]
+    pub end_time: f64,
+    /// The scenario to run.
+    #[arg(long, default_value = "scenarios/dam_break.ron")]
+    pub scenario: PathBuf,
+    /// Extra overrides for every run, as for a normal run (e.g. --set
+    /// pipeline.neighbour_grid.sort_every=0).
+    #[arg(long = "set", value_name = "PATH=VALUE")]
+    pub sets: Vec<String>,
+    /// Folder for bench.csv and bench.md.
+    #[arg(long, default_value = "out/bench")]
+    pub out: PathBuf,
+    /// Internal: run one case in this process and print its result as JSON.
+    #[arg(long, hide = true)]
+    pub child: Option<String>,
+}
+
+/// One run's measurements (what a child process prints).
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct Measurement {
+    pub particles: usize,
+    pub threads: usize,
+    pub steps: u64,
+    pub simulated_time: f64,
+    pub wall_seconds: f64,
+    pub ghosts_mean: f64,
+    /// Neighbour pairs at the last step times the steps: pair interactions per sweep.
+    pub interactions: f64,
+    /// (stage, seconds).
+    pub stages: Vec<(String, f64)>,
+    /// Peak resident memory of the process (VmHWM) [bytes].
+    pub peak_bytes: u64,
+    /// Resident memory before the scenario was loaded [bytes].
+    pub base_bytes: u64,
+    /// Resident memory at the end of the run, the state still held (VmRSS) [bytes].
+    pub end_bytes: u64,
+    /// Live heap at the end of the run, minus before loading (counting allocator).
+    pub heap_end: u64,
+    /// Peak live heap during the run (setup included), minus before loading.
+    pub heap_peak: u64,
+    pub status: String,
+    /// The run's probes.csv `front` column, (time, x), when the scenario writes it.
+    pub front: Vec<(f64, f64)>,
+}
+
+impl Measurement {
+    pub fn particle_steps_per_second(&self) -> f64 {
+        self.particles as f64 * self.steps as f64 / self.wall_seconds.max(1e-12)
+    }
+    /// Peak memory above the process's starting footprint, per fluid particle.
+    pub fn bytes_per_particle(&self) -> f64 {
+        self.peak_bytes.saturating_sub(self.base_bytes) as f64 / self.particles.max(1) as f64
+    }
+    /// Live heap while stepping (at the end of the run) per fluid particle: the
+    /// state, lists and buffers the run holds, without the transient peak of setup.
+    pub fn steady_bytes_per_particle(&self) -> f64 {
+        self.heap_end as f64 / self.particles.max(1) as f64
+    }
+    fn share(&self, stage: &str) -> f64 {
+        let total: f64 = self.stages.iter().map(|s| s.1).sum();
+        let s: f64 = self
+            .stages
+            .iter()
+            .filter(|s| s.0 == stage)
+            .map(|s| s.1)
+            .sum();
+        100.0 * s / total.max(1e-300)
+    }
+}
+
+/// Ends the run after a fixed number of steps (placed last in the pipeline, after
+/// `Integrate`, so the last step is an ordinary one).
+struct BenchStop {
+    steps: u64,
+}
+
+#[derive(Debug, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+struct StopParams {
+    steps: u64,
+}
+
+impl Stage for BenchStop {
+    fn name(&self) -> &'static str {
+        "bench_stop"
+    }
+    fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
+        if sim.clock.step >= self.steps {
+            sim.clock.end_time = sim.clock.time;
+        }
+        Ok(())
+    }
+}
+
+/// Parses 5k, 20k, 1.28M, 5000.
+pub fn parse_count(s: &str) -> Result<usize, String> {
+    let s = s.trim();
+    let (num, scale) = match s.chars().last() {
+        Some('k' | 'K') => (&s[..s.len() - 1], 1e3),
+        Some('M' | 'm') => (&s[..s.len() - 1], 1e6),
+        _ => (s, 1.0),
+    };
+    num.parse::<f64>()
+        .ok()
+        .filter(|v| *v > 0.0)
+        .map(|v| (v * scale).round() as usize)
+        .ok_or_else(|| format!("`{s}` is not a particle count (e.g. 5k, 20k, 1.28M)"))
+}
+
+fn label(n: usize) -> String {
+    if n >= 1_000_000 {
+        format!("{}M", n as f64 / 1e6)
+    } else if n >= 1000 {
+        format!("{}k", n as f64 / 1e3)
+    } else {
+        n.to_string()
+    }
+}
+
+/// Resident-memory figures from /proc/self/status [bytes] (0 where unavailable).
+fn proc_status(field: &str) -> u64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with(field))
+                .and_then(|l| l.split_whitespace().nth(1).map(str::to_string))
+        })
+        .and_then(|kb| kb.parse::<u64>().ok())
+        .map_or(0, |kb| kb * 1024)
+}
+
+/// A case: particles, threads, steps (0: run to `end_time`), end time.
+#[derive(Clone, Copy, Debug)]
+pub struct Case {
+    pub particles: usize,
+    pub threads: usize,
+    pub steps: u64,
+    pub end_time: f64,
+}
+
+impl Case {
+    fn encode(&self) -> String {
+        format!(
+            "{},{},{},{}",
+            self.particles, self.threads, self.steps, self.end_time
+        )
+    }
+    fn decode(s: &str) -> Result<Self, String> {
+        let v: Vec<&str> = s.split(',').collect();
+        let bad = || format!("bad --child `{s}`");
+        if v.len() != 4 {
+            return Err(bad());
+        }
+        Ok(Self {
+            particles: v[0].parse().map_err(|_| bad())?,
+            threads: v[1].parse().map_err(|_| bad())?,
+            steps: v[2].parse().map_err(|_| bad())?,
+            end_time: v[3].parse().map_err(|_| bad())?,
+        })
+    }
+}
+
+/// Runs one case in this process.
+pub fn run_case(
+    case: Case,
+    scenario: &Path,
+    sets: &[String],
+    extra: &[&str],
+    out: &Path,
+) -> Result<Measurement, String> {
+    let base_bytes = proc_status("VmRSS:");
+    let heap_base = heap_bytes().0;
+    let mut text =
+        std::fs::read_to_string(scenario).map_err(|e| format!("{}: {e}", scenario.display()))?;
+    let mut registry = sph_stages::standard_registry();
+    registry.register(
+        "bench_stop",
+        "ends a benchmark run after a fixed number of steps",
+        |p: StopParams| Ok(BenchStop { steps: p.steps }),
+    );
+    let across = ((2 * case.particles) as f64).sqrt().round() as usize;
+    let mut overrides: Vec<String> = vec![format!("resolution=ParticlesAcross({across})")];
+    if case.steps > 0 {
+        // Append BenchStop as the pipeline's last entry: before the file's last `]`.
+        let at = text
+            .rfind(']')
+            .ok_or("the scenario has no pipeline list to append BenchStop to")?;
+        text.insert_str(at, &format!("BenchStop(steps: {}),\n", case.steps));
+        overrides.push("end_time=1.0e6".into());
+    } else {
+        overrides.push(format!("end_time={}", case.end_time));
+    }
+    overrides.extend(extra.iter().map(|s| s.to_string()));
+    overrides.extend(sets.iter().cloned());
+    let overrides = overrides
+        .iter()
+        .map(|s| s.parse::<Override>().map_err(|e| e.to_string()))
+        .collect::<Result<Vec<_>, _>>()?;
+    let scenario = Scenario::from_str(
+        &text,
+        &scenario.display().to_string(),
+        &overrides,
+        &registry,
+    )
+    .map_err(|e| e.to_string())?;
+    if case.steps > 0
+        && scenario.spec.pipeline.last().map(|e| e.name.as_str()) != Some("bench_stop")
+    {
+        return Err("BenchStop did not land at the end of the pipeline".into());
+    }
+    let opts = RunOptions {
+        out_dir: out.to_path_buf(),
+        threads: Some(case.threads),
+        progress: false,
+        trace: None,
+    };
+    let (summary, sim) = run_keeping_state(scenario, &opts).map_err(|e| e.to_string())?;
+    let end_bytes = proc_status("VmRSS:");
+    let (heap_end, heap_peak) = heap_bytes();
+    let pairs = sim
+        .resources
+        .get::<Neighbours>()
+        .map_or(0, |nb| nb.interactions());
+    let front = front_series(&out.join("probes.csv"));
+    Ok(Measurement {
+        particles: count::<Fluid>(&sim.world),
+        threads: summary.threads,
+        steps: summary.steps,
+        simulated_time: summary.simulated_time,
+        wall_seconds: summary.wall_seconds,
+        ghosts_mean: summary.ghost_particles_mean,
+        interactions: pairs as f64 * summary.steps as f64,
+        stages: summary
+            .stages
+            .iter()
+            .map(|s| (s.stage.clone(), s.seconds))
+            .collect(),
+        peak_bytes: proc_status("VmHWM:"),
+        base_bytes,
+        end_bytes,
+        heap_end: heap_end.saturating_sub(heap_base) as u64,
+        heap_peak: heap_peak.saturating_sub(heap_base) as u64,
+        status: summary.status,
+        front,
+    })
+}
+
+/// The `front` column of a probes.csv, if any.
+fn front_series(path: &Path) -> Vec<(f64, f64)> {
+    let Ok(text) = std::fs::read_to_string(path) else {
+        return Vec::new();
+    };
+    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
+    let Some(k) = lines
+        .next()
+        .and_then(|h| h.split(',').position(|c| c.trim() == "front"))
+    else {
+        return Vec::new();
+    };
+    lines
+        .filter_map(|l| {
+            let v: Vec<&str> = l.split(',').collect();
+            Some((
+                v.first()?.trim().parse().ok()?,
+                v.get(k)?.trim().parse().ok()?,
+            ))
+        })
+        .collect()
+}
+
+/// Runs one case in a child process (the current executable with `bench --child`).
+pub fn run_child(
+    case: Case,
+    args: &BenchArgs,
+    extra: &[&str],
+    tag: &str,
+) -> Result<Measurement, String> {
+    let exe = std::env::current_exe().map_err(|e| e.to_string())?;
+    let out = args.out.join("runs").join(tag);
+    let mut cmd = Command::new(exe);
+    cmd.arg("bench")
+        .arg("--child")
+        .arg(case.encode())
+        .arg("--scenario")
+        .arg(&args.scenario)
+        .arg("--out")
+        .arg(&out);
+    for s in args
+        .sets
+        .iter()
+        .map(String::as_str)
+        .chain(extra.iter().copied())
+    {
+        cmd.arg(format!("--set={s}"));
+    }
+    let output = cmd.output().map_err(|e| e.to_string())?;
+    let _ = std::fs::remove_dir_all(&out);
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let line = stdout.lines().rev().find(|l| l.starts_with('{'));
+    match (output.status.success(), line) {
+        (true, Some(line)) => serde_json::from_str(line).map_err(|e| e.to_string()),
+        _ => Err(format!(
+            "{tag}: {}",
+            String::from_utf8_lossy(&output.stderr).trim()
+        )),
+    }
+}
+
+/// The child side: run the case given by `--child` and print its measurement.
+fn child_main(spec: &str, args: &BenchArgs) -> Result<(), String> {
+    let case = Case::decode(spec)?;
+    let m = run_case(case, &args.scenario, &args.sets, &[], &args.out)?;
+    println!("{}", serde_json::to_string(&m).map_err(|e| e.to_string())?);
+    Ok(())
+}
+
+fn median(mut v: Vec<Measurement>) -> Measurement {
+    v.sort_by(|a, b| a.wall_seconds.total_cmp(&b.wall_seconds));
+    v.swap_remove(v.len() / 2)
+}
+
+/// Stages reported in their own column; the rest are summed as "other".
+const SHOWN: [&str; 7] = [
+    "ghost_walls",
+    "neighbour_grid",
+    "reinitialise",
+    "continuity",
+    "forces",
+    "integrate",
+    "eos",
+];
+const OUTPUTS: [&str; 4] = ["probe", "energy", "vtk_frames", "snapshots"];
+
+/// Runs the whole benchmark; returns the fixed-step and fixed-time measurements.
+pub fn bench(args: &BenchArgs) -> Result<(Vec<Measurement>, Vec<Measurement>), String> {
+    if let Some(spec) = &args.child {
+        child_main(spec, args)?;
+        return Ok((Vec::new(), Vec::new()));
+    }
+    let sizes = args
+        .sizes
+        .iter()
+        .map(|s| parse_count(s))
+        .collect::<Result<Vec<_>, _>>()?;
+    let time_sizes = args
+        .time_sizes
+        .iter()
+        .filter(|s| !matches!(s.trim(), "" | "none"))
+        .map(|s| parse_count(s))
+        .collect::<Result<Vec<_>, _>>()?;
+    if args.threads.contains(&0) || args.threads.is_empty() {
+        return Err("--threads: give counts >= 1".into());
+    }
+    std::fs::create_dir_all(&args.out).map_err(|e| e.to_string())?;
+    let mut fixed = Vec::new();
+    for &n in &sizes {
+        for &t in &args.threads {
+            let mut runs = Vec::new();
+            for r in 0..args.repeats.max(1) {
+                let case = Case {
+                    particles: n,
+                    threads: t,
+                    steps: args.steps,
+                    end_time: 0.0,
+                };
+                let m = run_child(case, args, &[], &format!("{}-{t}t-{r}", label(n)))?;
+                eprintln!(
+                    "{:>6} particles, {t} thread(s), run {}: {:.2} s, {:.3e} particle-steps/s",
+                    m.particles,
+                    r + 1,
+                    m.wall_seconds,
+                    m.particle_steps_per_second()
+                );
+                runs.push(m);
+            }
+            fixed.push(median(runs));
+        }
+    }
+    let mut timed = Vec::new();
+    let t_max = args.threads.iter().copied().max().unwrap_or(1);
+    for &n in &time_sizes {
+        let case = Case {
+            particles: n,
+            threads: t_max,
+            steps: 0,
+            end_time: args.end_time,
+        };
+        let m = run_child(case, args, &[], &format!("{}-to-t", label(n)))?;
+        eprintln!(
+            "{:>6} particles to t = {} s: {:.2} s wall, {} steps",
+            m.particles, m.simulated_time, m.wall_seconds, m.steps
+        );
+        timed.push(m);
+    }
+    let (csv, md) = (csv_table(&fixed, &timed), markdown(&fixed, &timed, args));
+    std::fs::write(args.out.join("bench.csv"), &csv).map_err(|e| e.to_string())?;
+    std::fs::write(args.out.join("bench.md"), &md).map_err(|e| e.to_string())?;
+    let _ = std::fs::remove_dir_all(args.out.join("runs"));
+    println!("{md}");
+    println!(
+        "written: {}, {}",
+        args.out.join("bench.csv").display(),
+        args.out.join("bench.md").display()
+    );
+    Ok((fixed, timed))
+}
+
+/// Parallel efficiency of `m`: its throughput over (threads x the 1-thread
+/// throughput at the same size), if that run exists.
+fn efficiency(m: &Measurement, all: &[Measurement]) -> Option<f64> {
+    let one = all
+        .iter()
+        .find(|o| o.particles == m.particles && o.threads == 1)?;
+    Some(m.particle_steps_per_second() / (m.threads as f64 * one.particle_steps_per_second()))
+}
+
+fn csv_table(fixed: &[Measurement], timed: &[Measurement]) -> String {
+    let mut out = String::from("kind,particles,threads,steps,simulated_time_s,wall_s,particle_steps_per_s,interactions_per_s,ghosts_mean,peak_rss_mib,rss_bytes_per_particle_peak,heap_bytes_per_particle_peak,heap_bytes_per_particle_steady,parallel_efficiency");
+    for s in SHOWN.iter().chain(OUTPUTS.iter()) {
+        let _ = write!(out, ",{s}_pct");
+    }
+    out.push('\n');
+    for (kind, set) in [("steps", fixed), ("to_time", timed)] {
+        for m in set {
+            let eff = efficiency(m, fixed).map_or(String::new(), |e| format!("{e:.3}"));
+            let _ = write!(
+                out,
+                "{kind},{},{},{},{:.6},{:.3},{:.4e},{:.4e},{:.0},{:.1},{:.0},{:.0},{:.0},{eff}",
+                m.particles,
+                m.threads,
+                m.steps,
+                m.simulated_time,
+                m.wall_seconds,
+                m.particle_steps_per_second(),
+                m.interactions / m.wall_seconds.max(1e-12),
+                m.ghosts_mean,
+                m.peak_bytes as f64 / 1048576.0,
+                m.bytes_per_particle(),
+                m.heap_peak as f64 / m.particles.max(1) as f64,
+                m.steady_bytes_per_particle(),
+            );
+            for s in SHOWN.iter().chain(OUTPUTS.iter()) {
+                let _ = write!(out, ",{:.2}", m.share(s));
+            }
+            out.push('\n');
+        }
+    }
+    out
+}
+
+fn markdown(fixed: &[Measurement], timed: &[Measurement], args: &BenchArgs) -> String {
+    let mut out = format!(
+        "# engine bench\n\n`{}`, {} steps per fixed-step run, median of {} run(s); outputs at the scenario's default rates. Machine: {} logical CPUs.\n\n",
+        args.scenario.display(),
+        args.steps,
+        args.repeats.max(1),
+        std::thread::available_parallelism().map_or(0, |n| n.get())
+    );
+    out += "| particles | threads | steps | wall [s] | particle-steps/s | interactions/s | peak RSS [MiB] | B/particle: peak RSS | peak heap | heap while stepping | parallel eff. |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+    for m in fixed {
+        let eff = efficiency(m, fixed).map_or("-".into(), |e| format!("{:.0} %", 100.0 * e));
+        let _ = writeln!(
+            out,
+            "| {} | {} | {} | {:.2} | {:.3e} | {:.3e} | {:.0} | {:.0} | {:.0} | {:.0} | {eff} |",
+            m.particles,
+            m.threads,
+            m.steps,
+            m.wall_seconds,
+            m.particle_steps_per_second(),
+            m.interactions / m.wall_seconds.max(1e-12),
+            m.peak_bytes as f64 / 1048576.0,
+            m.bytes_per_particle(),
+            m.heap_peak as f64 / m.particles.max(1) as f64,
+            m.steady_bytes_per_particle()
+        );
+    }
+    out += "\nPer-stage share of the step time [%]:\n\n| particles | threads |";
+    for s in SHOWN {
+        let _ = write!(out, " {s} |");
+    }
+    out += " probes+outputs |\n|---:|---:|";
+    for _ in 0..=SHOWN.len() {
+        out += "---:|";
+    }
+    out.push('\n');
+    for m in fixed.iter().chain(timed) {
+        let _ = write!(out, "| {} | {} |", m.particles, m.threads);
+        for s in SHOWN {
+            let _ = write!(out, " {:.1} |", m.share(s));
+        }
+        let outputs: f64 = OUTPUTS.iter().map(|s| m.share(s)).sum();
+        let _ = writeln!(out, " {outputs:.2} |");
+    }
+    if !timed.is_empty() {
+        out += "\nTo a fixed physical time:\n\n| particles | threads | end time [s] | steps | wall [s] | particle-steps/s |\n|---:|---:|---:|---:|---:|---:|\n";
+        for m in timed {
+            let _ = writeln!(
+                out,
+                "| {} | {} | {:.3} | {} | {:.2} | {:.3e} |",
+                m.particles,
+                m.threads,
+                m.simulated_time,
+                m.steps,
+                m.wall_seconds,
+                m.particle_steps_per_second()
+            );
+        }
+    }
+    out
+}
+
+/// Entry point of `engine bench`.
+pub fn main(args: &BenchArgs) -> Result<(), String> {
+    bench(args).map(|_| ())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn counts_parse_with_suffixes() {
+        assert_eq!(parse_count("5k"), Ok(5000));
+        assert_eq!(parse_count("1.28M"), Ok(1_280_000));
+        assert_eq!(parse_count("320"), Ok(320));
+        assert!(parse_count("lots").is_err());
+        assert_eq!(label(1_280_000), "1.28M");
+    }
+}
