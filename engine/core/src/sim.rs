@@ -44,9 +44,12 @@ impl Tait {
     pub fn pressure(&self, rho: f64) -> f64 {
         self.b * ((rho / self.rho0).powf(self.gamma) - 1.0)
     }
-    /// rho(p), the inverse of [`Tait::pressure`].
+    /// rho(p), the inverse of [`Tait::pressure`]. Tension beyond -B has no density; it
+    /// maps to the smallest positive one, rho_0 1e-12^(1/gamma) (a ghost of a spray
+    /// particle, corrected hydrostatically upward, can ask for it; a zero density
+    /// would make p / rho^2 undefined).
     pub fn density(&self, p: f64) -> f64 {
-        self.rho0 * (1.0 + p / self.b).max(0.0).powf(1.0 / self.gamma)
+        self.rho0 * (1.0 + p / self.b).max(1e-12).powf(1.0 / self.gamma)
     }
     /// Specific internal energy e(rho) = integral from rho_0 to rho of p/rho'^2 drho'.
     pub fn internal_energy(&self, rho: f64) -> f64 {
