@@ -204,7 +204,8 @@ impl Stage for Integrate {
         sim.clock.step += 1;
         self.walls.at(sim.clock.time);
         if self.params.reflect_at_walls {
-            let reflected = self.reflect(&mut x, &mut v, &mut vh);
+            let rho0 = sim.constants.eos.rho0;
+            let reflected = self.reflect(rho0, &mut x, &mut v, &mut vh, &mut rho, &mut rh);
             if reflected > 0 {
                 *sim.diagnostics
                     .entry("wall_reflections".into())
@@ -249,10 +250,24 @@ impl Integrate {
     }
 
     /// Reflects particles that ended the step behind a wall; returns how many.
-    fn reflect(&self, x: &mut [Position], v: &mut [Velocity], vh: &mut [HalfVelocity]) -> usize {
-        (x, v, vh)
+    ///
+    /// A particle only gets through its ghosts when it carries little or no pressure
+    /// (thin spray, rarefied below rho_0); continuity then keeps rarefying it as it
+    /// leaves the wall, which it crossed rather than approached. So a reflected
+    /// particle's density is raised to at least rho_0: it restarts at rest pressure
+    /// instead of as ever thinner spray.
+    fn reflect(
+        &self,
+        rho0: f64,
+        x: &mut [Position],
+        v: &mut [Velocity],
+        vh: &mut [HalfVelocity],
+        rho: &mut [Density],
+        rh: &mut [HalfDensity],
+    ) -> usize {
+        (x, v, vh, rho, rh)
             .into_par_iter()
-            .map(|(x, v, vh)| {
+            .map(|(x, v, vh, rho, rh)| {
                 let mut hit = 0;
                 for w in self.walls.now() {
                     let s = w.abscissa(x.0);
@@ -263,6 +278,8 @@ impl Integrate {
                         x.0 -= 2.0 * d * n;
                         v.0 -= 2.0 * (v.0 - vw).dot(n).min(0.0) * n;
                         vh.0 -= 2.0 * (vh.0 - vw).dot(n).min(0.0) * n;
+                        rho.0 = rho.0.max(rho0);
+                        rh.0 = rh.0.max(rho0);
                         hit = 1;
                     }
                 }
