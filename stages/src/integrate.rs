@@ -36,6 +36,11 @@ pub struct Params {
     /// gradient vanishes as it meets its own ghost. With `false` such a particle stops
     /// the run as unstable. Default true.
     pub reflect_at_walls: bool,
+    /// A reflected particle's density is raised to at least rho_0. Meant with
+    /// `Eos(min_pressure: 0)`: a pressureless spray particle gets through its ghosts,
+    /// and continuity would keep rarefying it as it leaves the wall it crossed (the
+    /// sloshing runs' roof spray). Default false.
+    pub restore_density_on_reflection: bool,
 }
 
 impl Default for Params {
@@ -46,6 +51,7 @@ impl Default for Params {
             collapse_fraction: 1e-3,
             density_limit: 0.5,
             reflect_at_walls: true,
+            restore_density_on_reflection: false,
         }
     }
 }
@@ -204,8 +210,12 @@ impl Stage for Integrate {
         sim.clock.step += 1;
         self.walls.at(sim.clock.time);
         if self.params.reflect_at_walls {
-            let rho0 = sim.constants.eos.rho0;
-            let reflected = self.reflect(rho0, &mut x, &mut v, &mut vh, &mut rho, &mut rh);
+            let floor = if self.params.restore_density_on_reflection {
+                sim.constants.eos.rho0
+            } else {
+                0.0
+            };
+            let reflected = self.reflect(floor, &mut x, &mut v, &mut vh, &mut rho, &mut rh);
             if reflected > 0 {
                 *sim.diagnostics
                     .entry("wall_reflections".into())
@@ -249,16 +259,12 @@ impl Integrate {
         Err(unstable(&what, i, p))
     }
 
-    /// Reflects particles that ended the step behind a wall; returns how many.
-    ///
-    /// A particle only gets through its ghosts when it carries little or no pressure
-    /// (thin spray, rarefied below rho_0); continuity then keeps rarefying it as it
-    /// leaves the wall, which it crossed rather than approached. So a reflected
-    /// particle's density is raised to at least rho_0: it restarts at rest pressure
-    /// instead of as ever thinner spray.
+    /// Reflects particles that ended the step behind a wall; returns how many. With
+    /// `restore_density_on_reflection`, `floor` (rho_0) is the reflected particle's
+    /// least density; otherwise `floor` is 0 and densities are kept.
     fn reflect(
         &self,
-        rho0: f64,
+        floor: f64,
         x: &mut [Position],
         v: &mut [Velocity],
         vh: &mut [HalfVelocity],
@@ -278,8 +284,8 @@ impl Integrate {
                         x.0 -= 2.0 * d * n;
                         v.0 -= 2.0 * (v.0 - vw).dot(n).min(0.0) * n;
                         vh.0 -= 2.0 * (vh.0 - vw).dot(n).min(0.0) * n;
-                        rho.0 = rho.0.max(rho0);
-                        rh.0 = rh.0.max(rho0);
+                        rho.0 = rho.0.max(floor);
+                        rh.0 = rh.0.max(floor);
                         hit = 1;
                     }
                 }
