@@ -19,13 +19,11 @@ const MIN_CONDITION: f64 = 1e-3;
 /// Running sums for one particle's filtered density.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct MlsSums {
-    /// Upper triangle of A: a00, a01, a02, a11, a12, a22.
+    /// Upper triangle of A: a00 (= sum V W, the Shepard denominator), a01, a02,
+    /// a11, a12, a22.
     a: [f64; 6],
-    /// Shepard sums: sum m W, sum V W.
-    num: f64,
-    den: f64,
-    /// (d, m W) of each term, needed after A is known: kept as the moments
-    /// sum m W, sum m W d.
+    /// Mass moments sum m W (the Shepard numerator) and sum m W d, which give
+    /// sum m W^MLS once A is known.
     m0: f64,
     m1: DVec2,
 }
@@ -41,15 +39,13 @@ impl MlsSums {
         self.a[3] += vw * d.x * d.x;
         self.a[4] += vw * d.x * d.y;
         self.a[5] += vw * d.y * d.y;
-        self.num += m * w;
-        self.den += vw;
         self.m0 += m * w;
         self.m1 += m * w * d;
     }
 
     /// The Shepard-filtered density sum m W / sum V W.
     pub fn shepard(&self) -> f64 {
-        self.num / self.den
+        self.m0 / self.a[0]
     }
 
     /// The MLS density, or the Shepard one where A is ill conditioned.

@@ -59,19 +59,13 @@ impl RectangularTank {
     ///   M_R = M_O + y_R F_x - y_R theta rho g L h,   x_O = y_R theta,
     /// with I_n = -2/k_n^2, J_n = -4 tanh(k_n h/2)/k_n^3 and J0 as in [`Self::j0`].
     pub fn roll_moment_response(&self, sigma: f64, axis_height: f64) -> (f64, f64) {
-        let (l, h, rho, g) = (self.breadth, self.depth, self.density, self.gravity);
+        let (l, h, g) = (self.breadth, self.depth, self.gravity);
         let y_r = axis_height - h;
         let s2 = sigma * sigma;
         // Per unit theta_a, coefficients of sin(sigma t):
-        let theta = 1.0;
-        let theta_dd = -s2;
-        let x_dd = y_r * theta_dd;
-        let mut m_o = -rho * g * theta * l * h * h / 2.0
-            - rho * x_dd * l * h * h / 2.0
-            - rho * self.j0() * theta_dd;
-        let mut f_x = -rho * l * h * (x_dd + theta_dd * h / 2.0);
-        // Quadrature parts (the rigid terms have none).
-        let (mut m_o_q, mut f_x_q) = (0.0, 0.0);
+        // Modal sums sum (J_n beta_n'' + g I_n beta_n) and sum I_n beta_n'', in phase
+        // and in quadrature.
+        let (mut modal_m, mut modal_f, mut modal_m_q, mut modal_f_q) = (0.0, 0.0, 0.0, 0.0);
         for n in (1..=TERMS).step_by(2) {
             let k = n as f64 * PI / l;
             let sn2 = self.natural_frequency(n).powi(2);
@@ -83,15 +77,41 @@ impl RectangularTank {
             let (b_re, b_im) = (drive * re / norm, -drive * im / norm);
             let (i_n, j_n) = (-2.0 / (k * k), -4.0 * (k * h / 2.0).tanh() / k.powi(3));
             // beta'' = -sigma^2 beta for each part.
-            m_o -= rho * (j_n * -s2 + g * i_n) * b_re;
-            m_o_q -= rho * (j_n * -s2 + g * i_n) * b_im;
-            f_x -= rho * i_n * -s2 * b_re;
-            f_x_q -= rho * i_n * -s2 * b_im;
+            modal_m += (j_n * -s2 + g * i_n) * b_re;
+            modal_m_q += (j_n * -s2 + g * i_n) * b_im;
+            modal_f += i_n * -s2 * b_re;
+            modal_f_q += i_n * -s2 * b_im;
         }
+        // Per unit theta_a: theta = 1, theta'' = -sigma^2 in phase; the rigid terms
+        // have no quadrature part.
+        let j0 = self.j0();
         (
-            m_o + y_r * f_x - y_r * theta * rho * g * l * h,
-            m_o_q + y_r * f_x_q,
+            self.axis_moment(j0, y_r, 1.0, -s2, y_r * -s2, modal_m, modal_f),
+            self.axis_moment(j0, y_r, 0.0, 0.0, 0.0, modal_m_q, modal_f_q),
         )
+    }
+
+    /// M_R = M_O + y_R F_x - y_R theta rho g L h from the roll (theta, theta''), the
+    /// axis O's acceleration x''_O and the modal sums sum (J_n beta_n'' + g I_n beta_n)
+    /// and sum I_n beta_n'' (see [`Self::roll_moment_response`]).
+    #[allow(clippy::too_many_arguments)]
+    fn axis_moment(
+        &self,
+        j0: f64,
+        y_r: f64,
+        theta: f64,
+        theta_dd: f64,
+        x_dd: f64,
+        modal_m: f64,
+        modal_f: f64,
+    ) -> f64 {
+        let (l, h, rho, g) = (self.breadth, self.depth, self.density, self.gravity);
+        let m_o = -rho * g * theta * l * h * h / 2.0
+            - rho * x_dd * l * h * h / 2.0
+            - rho * j0 * theta_dd
+            - rho * modal_m;
+        let f_x = -rho * l * h * (x_dd + theta_dd * h / 2.0) - rho * modal_f;
+        m_o + y_r * f_x - y_r * theta * rho * g * l * h
     }
 
     /// The linear roll moment about the axis over time for a prescribed motion that
@@ -109,7 +129,7 @@ impl RectangularTank {
         times: &[f64],
     ) -> Vec<f64> {
         const MODES: usize = 61;
-        let (l, h, rho, g) = (self.breadth, self.depth, self.density, self.gravity);
+        let (l, h, g) = (self.breadth, self.depth, self.gravity);
         let y_r = axis_height - h;
         // Per mode: sigma_n^2, gain, lever, I_n, J_n, 2 gamma_n.
         let modes: Vec<(f64, f64, f64, f64, f64, f64)> = (1..=MODES)
@@ -157,16 +177,13 @@ impl RectangularTank {
             }
             let (theta, theta_dd, sway_dd) = motion(target);
             let x_dd = y_r * theta_dd + sway_dd;
-            let mut m_o = -rho * g * theta * l * h * h / 2.0
-                - rho * x_dd * l * h * h / 2.0
-                - rho * j0 * theta_dd;
-            let mut f_x = -rho * l * h * (x_dd + theta_dd * h / 2.0);
+            let (mut modal_m, mut modal_f) = (0.0, 0.0);
             for (m, (b, v)) in modes.iter().zip(&state) {
                 let b_dd = forcing(target, m) - m.0 * b - m.5 * v;
-                m_o -= rho * (m.4 * b_dd + g * m.3 * b);
-                f_x -= rho * m.3 * b_dd;
+                modal_m += m.4 * b_dd + g * m.3 * b;
+                modal_f += m.3 * b_dd;
             }
-            out.push(m_o + y_r * f_x - y_r * theta * rho * g * l * h);
+            out.push(self.axis_moment(j0, y_r, theta, theta_dd, x_dd, modal_m, modal_f));
         }
         out
     }

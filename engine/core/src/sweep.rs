@@ -28,7 +28,7 @@ use crate::runner::{run, RunError, RunOptions, Summary};
 use crate::{Scenario, StageRegistry};
 use std::f64::consts::PI;
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 
@@ -415,9 +415,4 @@ pub fn linear_tank(scenario: &Scenario, f: f64) -> RectangularTank {
         gravity: glam::DVec2::from(scenario.spec.fluid.gravity).length(),
         viscosity: alpha * scenario.h * scenario.sound_speed / 8.0,
     }
-}
-
-/// The sweep's output folder: `out/<name>` unless given.
-pub fn default_out(base_name: &str) -> PathBuf {
-    PathBuf::from("out").join(base_name)
 }
