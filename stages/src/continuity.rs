@@ -34,6 +34,7 @@ impl Stage for Continuity {
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         require_neighbours(sim, "continuity")?;
         ensure_component::<Fluid, DensityRate>(&mut sim.world);
+        sim.resources.insert(ContinuityInPipeline);
         Ok(())
     }
 
@@ -62,6 +63,10 @@ impl Stage for Continuity {
         Ok(())
     }
 }
+
+/// Marks that a `Continuity()` stage writes the density rate (so `Forces` refuses to
+/// write it too).
+pub struct ContinuityInPipeline;
 
 /// Setup check shared by the stages that sum over neighbours.
 pub fn require_neighbours(sim: &Sim, stage: &'static str) -> Result<(), SetupError> {

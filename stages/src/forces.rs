@@ -2,16 +2,21 @@
 //! dv_i/dt = - sum_j m_j (p_i/rho_i^2 + p_j/rho_j^2 + Pi_ij + R f_ij^n) grad_i W_ij + g,
 //! with Monaghan's artificial viscosity Pi_ij and, optionally, Monaghan's (2000)
 //! artificial pressure R f_ij^n against the tensile instability.
+//!
+//! With `with_continuity: true` the same neighbour loop also evaluates the continuity
+//! equation (as [`crate::continuity`] does, term for term in the same order, so the
+//! result is bit-identical to `Continuity()` placed before `Forces()`): one pass over
+//! the neighbours instead of two.
 
-use crate::continuity::require_neighbours;
+use crate::continuity::{require_neighbours, ContinuityInPipeline};
 use crate::neighbour_grid::Neighbours;
 use crate::packed::{with_packed, Fill, Packed};
 use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use sph_core::components::{Acceleration, Fluid};
+use sph_core::components::{Acceleration, DensityRate, Fluid};
 use sph_core::kernel::Kernel;
-use sph_core::sim::Sim;
+use sph_core::sim::{whole_pow, Sim};
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::world::{ensure_component, sum_fixed, Particles};
 use sph_core::{with_kernel, StageRegistry};
@@ -31,6 +36,9 @@ pub struct Params {
     pub epsilon_positive: f64,
     /// Exponent n of f_ij = W(r)/W(ds). Default 4.
     pub exponent: i32,
+    /// Also write the density rate d rho_i/dt = sum_j m_j v_ij . grad_i W_ij in the
+    /// same neighbour loop (then leave `Continuity()` out). Default false.
+    pub with_continuity: bool,
 }
 
 impl Default for Params {
@@ -42,6 +50,7 @@ impl Default for Params {
             epsilon: 0.2,
             epsilon_positive: 0.01,
             exponent: 4,
+            with_continuity: false,
         }
     }
 }
@@ -99,6 +108,16 @@ impl Stage for Forces {
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         require_neighbours(sim, "forces")?;
         ensure_component::<Fluid, Acceleration>(&mut sim.world);
+        if self.params.with_continuity {
+            if sim.resources.contains::<ContinuityInPipeline>() {
+                return Err(SetupError::new(
+                    "forces",
+                    "`with_continuity: true` and a Continuity() stage both write the \
+                     density rate; remove one of them",
+                ));
+            }
+            ensure_component::<Fluid, DensityRate>(&mut sim.world);
+        }
         Ok(())
     }
 
@@ -133,35 +152,66 @@ impl Forces {
         let c = &sim.constants;
         let (g, h, ds) = (c.gravity, c.h, c.spacing);
         let mut acc = particles.fluid_mut::<Acceleration>()?;
+        let mut rate = if self.params.with_continuity {
+            Some(particles.fluid_mut::<DensityRate>()?)
+        } else {
+            None
+        };
+        let n = acc.len();
         let mut dissipation = std::mem::take(&mut self.dissipation);
-        dissipation.resize(if want_power { acc.len() } else { 0 }, 0.0);
+        dissipation.resize(if want_power { n } else { 0 }, 0.0);
+        let (art, with_rate) = (self.params.artificial_pressure, rate.is_some());
+        // Per-particle outputs as optional slices, so one parallel loop serves every
+        // combination; the pair sum itself is monomorphised on the options.
+        let rate_out: &mut [DensityRate] = rate.as_deref_mut().unwrap_or(&mut []);
         with_kernel!(c.kernel, h, |k| {
             let prm = Pair::new(&self.params, k.w(ds), h);
-            let pair = |i: usize| {
-                if self.params.artificial_pressure {
-                    sum_over_neighbours::<_, true>(&prm, &k, all, nb.of(i), i)
-                } else {
-                    sum_over_neighbours::<_, false>(&prm, &k, all, nb.of(i), i)
+            let pair = |i: usize| match (art, with_rate) {
+                (true, true) => sum_over_neighbours::<_, true, true>(&prm, &k, all, nb.of(i), i),
+                (true, false) => sum_over_neighbours::<_, true, false>(&prm, &k, all, nb.of(i), i),
+                (false, true) => sum_over_neighbours::<_, false, true>(&prm, &k, all, nb.of(i), i),
+                (false, false) => {
+                    sum_over_neighbours::<_, false, false>(&prm, &k, all, nb.of(i), i)
                 }
             };
-            if want_power {
-                acc.par_iter_mut()
-                    .zip(dissipation.par_iter_mut())
-                    .enumerate()
-                    .for_each(|(i, (a, d))| {
-                        let (sum, visc) = pair(i);
-                        a.0 = sum + g;
-                        *d = 0.5 * all[i].m * visc;
-                    });
-            } else {
-                acc.par_iter_mut()
-                    .enumerate()
-                    .for_each(|(i, a)| a.0 = pair(i).0 + g);
-            }
+            acc.par_chunks_mut(CHUNK)
+                .zip(optional_chunks(rate_out, n))
+                .zip(optional_chunks(&mut dissipation[..], n))
+                .enumerate()
+                .for_each(|(c, ((acc, mut rate), mut diss))| {
+                    for (k, a) in acc.iter_mut().enumerate() {
+                        let i = c * CHUNK + k;
+                        let s = pair(i);
+                        a.0 = s.acc + g;
+                        if let Some(r) = rate.as_deref_mut() {
+                            r[k].0 = s.rate;
+                        }
+                        if let Some(d) = diss.as_deref_mut() {
+                            d[k] = 0.5 * all[i].m * s.visc_power;
+                        }
+                    }
+                });
         });
         let power = sum_fixed(dissipation.len(), |i| dissipation[i]);
         self.dissipation = dissipation;
         Ok(power)
+    }
+}
+
+/// Fluid particles per parallel chunk of the force loop.
+const CHUNK: usize = 256;
+
+/// `CHUNK`-sized chunks of an optional per-particle output: the slice's own chunks if
+/// it holds all `n` particles, else as many `None`s (the output is not wanted).
+fn optional_chunks<T: Send>(
+    out: &mut [T],
+    n: usize,
+) -> impl IndexedParallelIterator<Item = Option<&mut [T]>> {
+    use rayon::iter::Either;
+    if out.len() == n {
+        Either::Left(out.par_chunks_mut(CHUNK).map(Some))
+    } else {
+        Either::Right((0..n.div_ceil(CHUNK)).into_par_iter().map(|_| None))
     }
 }
 
@@ -171,7 +221,7 @@ struct Pair {
     beta: f64,
     epsilon: f64,
     epsilon_positive: f64,
-    exponent: i32,
+    exponent: u32,
     /// 1 / W(ds), for f_ij = (W(r_ij)/W(ds))^n.
     inv_w_ds: f64,
     h: f64,
@@ -186,7 +236,7 @@ impl Pair {
             beta: p.beta,
             epsilon: p.epsilon,
             epsilon_positive: p.epsilon_positive,
-            exponent: p.exponent,
+            exponent: p.exponent as u32,
             inv_w_ds: 1.0 / w_ds,
             h,
             eta2: 0.01 * h * h,
@@ -194,39 +244,28 @@ impl Pair {
     }
 }
 
-/// x^n for a small positive n by repeated squaring (`powi` with a run-time exponent
-/// is a library call).
-#[inline(always)]
-fn int_pow(x: f64, n: i32) -> f64 {
-    match n {
-        4 => {
-            let x2 = x * x;
-            x2 * x2
-        }
-        _ => {
-            let (mut base, mut e, mut out) = (x, n as u32, 1.0);
-            while e > 0 {
-                if e & 1 == 1 {
-                    out *= base;
-                }
-                base *= base;
-                e >>= 1;
-            }
-            out
-        }
-    }
+/// One fluid particle's sums over its neighbours.
+#[derive(Clone, Copy)]
+struct Sums {
+    /// Pressure, viscous and artificial-pressure acceleration (gravity not included).
+    acc: DVec2,
+    /// sum_j m_j Pi_ij v_ij . grad W (for the dissipation rate).
+    visc_power: f64,
+    /// d rho_i/dt by the continuity equation (0 unless asked for).
+    rate: f64,
 }
 
-/// Pressure and viscous acceleration of particle i, and sum_j m_j Pi_ij v_ij . grad W.
-/// `ART` selects Monaghan's artificial pressure at compile time.
+/// Pressure and viscous acceleration of particle i, sum_j m_j Pi_ij v_ij . grad W and,
+/// with `RATE`, the continuity equation's sum_j m_j v_ij . grad W. `ART` selects
+/// Monaghan's artificial pressure at compile time.
 #[inline(always)]
-fn sum_over_neighbours<K: Kernel, const ART: bool>(
+fn sum_over_neighbours<K: Kernel, const ART: bool, const RATE: bool>(
     prm: &Pair,
     k: &K,
     all: &[Packed],
     neighbours: &[u32],
     i: usize,
-) -> (DVec2, f64) {
+) -> Sums {
     let Packed {
         x: xi,
         v: vi,
@@ -235,7 +274,7 @@ fn sum_over_neighbours<K: Kernel, const ART: bool>(
         c: ci,
         ..
     } = all[i];
-    let (mut acc, mut visc_power) = (DVec2::ZERO, 0.0);
+    let (mut acc, mut visc_power, mut rate) = (DVec2::ZERO, 0.0, 0.0);
     for &j in neighbours {
         let pj = &all[j as usize];
         let xij = xi - pj.x;
@@ -256,7 +295,7 @@ fn sum_over_neighbours<K: Kernel, const ART: bool>(
         if ART {
             // R f_ij^n: R = eps (|p_i|/rho_i^2 + |p_j|/rho_j^2) over the negative
             // pressures, or eps_+ (p_i/rho_i^2 + p_j/rho_j^2) when both are positive.
-            let fij = int_pow(k.w(r) * prm.inv_w_ds, prm.exponent);
+            let fij = whole_pow(k.w(r) * prm.inv_w_ds, prm.exponent);
             let big_r = if pi_r2 > 0.0 && pj_r2 > 0.0 {
                 prm.epsilon_positive * (pi_r2 + pj_r2)
             } else {
@@ -264,8 +303,16 @@ fn sum_over_neighbours<K: Kernel, const ART: bool>(
             };
             term += big_r * fij;
         }
+        let vij_grad = vij.dot(grad);
         acc -= mj * term * grad;
-        visc_power += mj * visc * vij.dot(grad);
+        visc_power += mj * visc * vij_grad;
+        if RATE {
+            rate += mj * vij_grad;
+        }
     }
-    (acc, visc_power)
+    Sums {
+        acc,
+        visc_power,
+        rate,
+    }
 }

@@ -21,7 +21,7 @@ use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure, Velo
 use sph_core::motion::Pose;
 use sph_core::sim::{Sim, Tait};
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::walls::WallSet;
+use sph_core::walls::{WallLine, WallSet};
 use sph_core::world::{archetype, column, column_mut, count};
 use sph_core::StageRegistry;
 
@@ -62,6 +62,8 @@ pub fn register(registry: &mut StageRegistry) {
                 params: p,
                 walls: WallSet::default(),
                 corners: Vec::new(),
+                images: Vec::new(),
+                chunks: Vec::new(),
             })
         },
     );
@@ -80,7 +82,14 @@ pub struct GhostWalls {
     walls: WallSet,
     /// Pairs of walls sharing an end point: their corner gets double mirrors.
     corners: Vec<(usize, usize)>,
+    /// This step's ghosts, and the per-chunk lists they are gathered from (both kept
+    /// between steps: no per-step allocation once they have reached their size).
+    images: Vec<Image>,
+    chunks: Vec<Vec<Image>>,
 }
+
+/// Fluid particles per parallel chunk when finding the ghosts.
+const CHUNK: usize = 1024;
 
 /// One ghost to place: its source and the walls it is mirrored across.
 #[derive(Clone, Copy)]
@@ -126,7 +135,8 @@ impl Stage for GhostWalls {
         if let Some(s) = sim.resources.get_mut::<GhostSettings>() {
             s.pose = pose;
         }
-        let images = self.images(sim)?;
+        self.find_images(sim)?;
+        let images = &self.images[..];
         resize_pool(&mut sim.world, images.len());
         let Some(fluid) = archetype::<Fluid>(&sim.world) else {
             return Ok(());
@@ -148,7 +158,7 @@ impl Stage for GhostWalls {
             self.params
                 .hydrostatic
                 .then_some((sim.constants.eos, sim.constants.gravity, pose));
-        let walls = self.walls.now();
+        let (walls, lines) = (self.walls.now(), self.walls.lines());
         let slip = self.params.slip;
         (
             &mut gs[..],
@@ -156,17 +166,16 @@ impl Stage for GhostWalls {
             &mut gv[..],
             &mut gr[..],
             &mut gm[..],
-            &images[..],
+            images,
         )
             .into_par_iter()
             .for_each(|(g, x, v, rho, m, img)| {
                 let s = img.source as usize;
-                let mut walls_crossed = [Some(&walls[img.first as usize]), None];
-                walls_crossed[1] = img.second.map(|k| &walls[k as usize]);
                 let (mut pos, mut vel) = (fx[s].0, fv[s].0);
-                for w in walls_crossed.into_iter().flatten() {
-                    vel = mirror_velocity(w, pos, vel, slip);
-                    pos = w.mirror(pos);
+                for k in std::iter::once(img.first).chain(img.second) {
+                    let k = k as usize;
+                    vel = mirror_velocity(&lines[k], &walls[k], pos, vel, slip);
+                    pos = lines[k].mirror(pos);
                 }
                 *g = Ghost { source: img.source };
                 x.0 = pos;
@@ -179,28 +188,32 @@ impl Stage for GhostWalls {
 }
 
 impl GhostWalls {
-    /// The ghosts this step needs, in a fixed order (by source, then wall).
-    fn images(&self, sim: &Sim) -> Result<Vec<Image>, StepError> {
+    /// Fills `images` with the ghosts this step needs, in a fixed order (by source,
+    /// then wall), reusing the per-chunk buffers from step to step.
+    fn find_images(&mut self, sim: &Sim) -> Result<(), StepError> {
+        self.images.clear();
         let Some(fluid) = archetype::<Fluid>(&sim.world) else {
-            return Ok(Vec::new());
+            return Ok(());
         };
         let pos = column::<Position>(fluid)?;
         let support = sim.constants.support();
-        let walls = self.walls.now();
+        let lines = self.walls.lines();
         let corners = &self.corners;
-        let near = |w: &Wall, x: DVec2| {
+        let near = |w: &WallLine, x: DVec2| {
             let (d, s) = (w.distance(x), w.abscissa(x));
-            (0.0..support).contains(&d) && s >= 0.0 && s <= w.length()
+            (0.0..support).contains(&d) && s >= 0.0 && s <= w.length
         };
-        Ok(pos
-            .par_chunks(1024)
+        self.chunks.resize_with(pos.len().div_ceil(CHUNK), Vec::new);
+        self.chunks.truncate(pos.len().div_ceil(CHUNK));
+        pos.par_chunks(CHUNK)
+            .zip(self.chunks.par_iter_mut())
             .enumerate()
-            .flat_map_iter(|(c, chunk)| {
-                let mut out = Vec::new();
+            .for_each(|(c, (chunk, out))| {
+                out.clear();
                 for (k, x) in chunk.iter().enumerate() {
-                    let source = (c * 1024 + k) as u32;
-                    for (w, wall) in walls.iter().enumerate() {
-                        if near(wall, x.0) {
+                    let source = (c * CHUNK + k) as u32;
+                    for (w, line) in lines.iter().enumerate() {
+                        if near(line, x.0) {
                             out.push(Image {
                                 source,
                                 first: w as u16,
@@ -209,7 +222,7 @@ impl GhostWalls {
                         }
                     }
                     for &(a, b) in corners {
-                        if near(&walls[a], x.0) && near(&walls[b], x.0) {
+                        if near(&lines[a], x.0) && near(&lines[b], x.0) {
                             out.push(Image {
                                 source,
                                 first: a as u16,
@@ -218,17 +231,19 @@ impl GhostWalls {
                         }
                     }
                 }
-                out
-            })
-            .collect())
+            });
+        for chunk in &self.chunks {
+            self.images.extend_from_slice(chunk);
+        }
+        Ok(())
     }
 }
 
 /// Velocity of the ghost of a particle at `x` moving at `v`, mirrored across wall `w`
-/// relative to the wall's velocity at the particle's foot on the wall.
-fn mirror_velocity(w: &Wall, x: DVec2, v: DVec2, slip: Slip) -> DVec2 {
-    let n = w.normal();
-    let vw = w.velocity_at(x - w.distance(x) * n);
+/// (`line` its geometry) relative to the wall's velocity at the particle's foot on it.
+fn mirror_velocity(line: &WallLine, w: &Wall, x: DVec2, v: DVec2, slip: Slip) -> DVec2 {
+    let n = line.normal;
+    let vw = w.velocity_at(x - line.distance(x) * n);
     match slip {
         Slip::FreeSlip => v - 2.0 * (v - vw).dot(n) * n,
         Slip::NoSlip => 2.0 * vw - v,

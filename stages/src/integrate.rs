@@ -11,7 +11,7 @@
 use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use sph_core::components::{Acceleration, Density, DensityRate, Fluid, Position, Velocity, Wall};
+use sph_core::components::{Acceleration, Density, DensityRate, Fluid, Position, Velocity};
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::walls::WallSet;
@@ -89,6 +89,8 @@ pub fn register(registry: &mut StageRegistry) {
                 params: p,
                 first_dt: None,
                 walls: WallSet::default(),
+                zero_a: Vec::new(),
+                zero_r: Vec::new(),
             })
         },
     );
@@ -106,6 +108,9 @@ pub struct Integrate {
     first_dt: Option<f64>,
     /// Walls where they are at the end of the step.
     walls: WallSet,
+    /// Zero rates for a pipeline without forces or continuity.
+    zero_a: Vec<Acceleration>,
+    zero_r: Vec<DensityRate>,
 }
 
 impl Stage for Integrate {
@@ -125,48 +130,47 @@ impl Stage for Integrate {
             sim.clock.time = sim.clock.end_time;
             return Ok(());
         };
-        let zero_a = vec![Acceleration::default(); fluid.len() as usize];
-        let zero_r = vec![DensityRate::default(); fluid.len() as usize];
-        // A pipeline without forces (or continuity) integrates with zero rates.
+        let n = fluid.len() as usize;
+        // A pipeline without forces (or continuity) integrates with zero rates; the
+        // zeros are kept between steps rather than allocated each step.
         let acc_col = fluid.get::<&Acceleration>();
         let rate_col = fluid.get::<&DensityRate>();
-        let acc: &[Acceleration] = acc_col.as_deref().unwrap_or(&zero_a);
-        let rate: &[DensityRate] = rate_col.as_deref().unwrap_or(&zero_r);
+        if acc_col.is_none() && self.zero_a.len() != n {
+            self.zero_a = vec![Acceleration::default(); n];
+        }
+        if rate_col.is_none() && self.zero_r.len() != n {
+            self.zero_r = vec![DensityRate::default(); n];
+        }
+        let acc: &[Acceleration] = acc_col.as_deref().unwrap_or(&self.zero_a);
+        let rate: &[DensityRate] = rate_col.as_deref().unwrap_or(&self.zero_r);
         let mut x = column_mut::<Position>(fluid)?;
         let mut v = column_mut::<Velocity>(fluid)?;
         let mut rho = column_mut::<Density>(fluid)?;
         let mut vh = column_mut::<HalfVelocity>(fluid)?;
         let mut rh = column_mut::<HalfDensity>(fluid)?;
 
-        if let Some(i) = acc.iter().position(|a| !a.0.is_finite()) {
-            return Err(unstable("non-finite acceleration", i, x[i].0));
-        }
-        if let Some(i) = rate.iter().position(|r| !r.0.is_finite()) {
-            return Err(unstable("non-finite density rate", i, x[i].0));
+        let ext = Extremes::of(&v, acc, rate, &rho);
+        if !ext.finite {
+            let bad = |i: &usize| !(acc[*i].0.is_finite() && rate[*i].0.is_finite());
+            let i = (0..acc.len()).find(bad).unwrap_or(0);
+            let what = if !acc[i].0.is_finite() {
+                "non-finite acceleration"
+            } else {
+                "non-finite density rate"
+            };
+            return Err(unstable(what, i, x[i].0));
         }
         let c = &sim.constants;
-        let max_v2 = v
-            .par_iter()
-            .map(|v| v.0.length_squared())
-            .reduce(|| 0.0, f64::max);
-        let max_a2 = acc
-            .par_iter()
-            .map(|a| a.0.length_squared())
-            .reduce(|| 0.0, f64::max);
-        let max_rho = rho.par_iter().map(|r| r.0).reduce(|| 0.0, f64::max);
-        let c_max = c.eos.sound_speed(max_rho.max(c.eos.rho0));
-        let mut dt = self.params.courant * (c.h / (c_max + max_v2.sqrt()));
-        if max_a2 > 0.0 {
-            dt = dt.min(self.params.courant * (c.h / max_a2.sqrt()).sqrt());
+        let c_max = c.eos.sound_speed(ext.max_rho.max(c.eos.rho0));
+        let mut dt = self.params.courant * (c.h / (c_max + ext.max_v2.sqrt()));
+        if ext.max_a2 > 0.0 {
+            dt = dt.min(self.params.courant * (c.h / ext.max_a2.sqrt()).sqrt());
         }
         dt = dt.min(self.params.max_dt);
         let first = *self.first_dt.get_or_insert(dt);
         if dt < self.params.collapse_fraction * first {
-            let i = acc
-                .iter()
-                .enumerate()
-                .max_by(|a, b| a.1 .0.length_squared().total_cmp(&b.1 .0.length_squared()));
-            let i = i.map_or(0, |(i, _)| i);
+            let a2 = |i: usize| acc[i].0.length_squared();
+            let i = (0..acc.len()).find(|&i| a2(i) == ext.max_a2).unwrap_or(0);
             return Err(unstable(
                 &format!("time step collapsed to {dt:.3e} s (first step {first:.3e} s)"),
                 i,
@@ -178,12 +182,27 @@ impl Stage for Integrate {
         if remaining < 1.5 * dt {
             dt = dt.min(remaining);
         }
-        let kick = if sim.clock.step == 0 {
+        let first_step = sim.clock.step == 0;
+        let kick = if first_step {
             0.5 * dt
         } else {
             0.5 * (sim.clock.dt + dt)
         };
-        (
+        sim.clock.dt = dt;
+        sim.clock.time += dt;
+        sim.clock.step += 1;
+        self.walls.at(sim.clock.time);
+        let reflect = self.params.reflect_at_walls;
+        let floor = if self.params.restore_density_on_reflection {
+            c.eos.rho0
+        } else {
+            0.0
+        };
+        let (lo, hi) = c.domain;
+        let (rho0, limit) = (c.eos.rho0, self.params.density_limit);
+        // One pass: kick, drift, reflect at the walls (at their end-of-step place),
+        // then check; it returns the reflections and the lowest offending index.
+        let (reflected, bad) = (
             &mut x[..],
             &mut v[..],
             &mut rho[..],
@@ -193,8 +212,9 @@ impl Stage for Integrate {
             rate,
         )
             .into_par_iter()
-            .for_each(|(x, v, rho, vh, rh, a, r)| {
-                let (vhalf, rhalf) = if sim.clock.step == 0 {
+            .enumerate()
+            .map(|(i, (x, v, rho, vh, rh, a, r))| {
+                let (vhalf, rhalf) = if first_step {
                     (v.0, rho.0)
                 } else {
                     (vh.0, rh.0)
@@ -204,106 +224,122 @@ impl Stage for Integrate {
                 x.0 += dt * vh.0;
                 v.0 = vh.0 + 0.5 * dt * a.0;
                 rho.0 = rh.0 + 0.5 * dt * r.0;
-            });
-        sim.clock.dt = dt;
-        sim.clock.time += dt;
-        sim.clock.step += 1;
-        self.walls.at(sim.clock.time);
-        if self.params.reflect_at_walls {
-            let floor = if self.params.restore_density_on_reflection {
-                sim.constants.eos.rho0
-            } else {
-                0.0
-            };
-            let reflected = self.reflect(floor, &mut x, &mut v, &mut vh, &mut rho, &mut rh);
-            if reflected > 0 {
-                *sim.diagnostics
-                    .entry("wall_reflections".into())
-                    .or_insert(0.0) += reflected as f64;
-            }
+                let hit = reflect && self.reflect(floor, x, v, vh, rho, rh);
+                let p = x.0;
+                let ok = p.is_finite()
+                    && rho.0.is_finite()
+                    && p.cmpge(lo).all()
+                    && p.cmple(hi).all()
+                    && (rho.0 / rho0 - 1.0).abs() <= limit
+                    && self.crossed_wall(p).is_none();
+                (hit as usize, (!ok).then_some(i))
+            })
+            .reduce(
+                || (0, None),
+                |(h1, b1), (h2, b2)| (h1 + h2, b1.into_iter().chain(b2).min()),
+            );
+        if reflected > 0 {
+            *sim.diagnostics
+                .entry("wall_reflections".into())
+                .or_insert(0.0) += reflected as f64;
         }
-        self.check(sim, &x, &rho)
+        match bad {
+            Some(i) => Err(self.diagnose(sim, i, x[i].0, rho[i].0)),
+            None => Ok(()),
+        }
+    }
+}
+
+/// The step-size inputs, from one parallel pass; the rare diagnostics (which particle
+/// is non-finite, which accelerates most) are looked up only when needed.
+#[derive(Clone, Copy)]
+struct Extremes {
+    max_v2: f64,
+    max_a2: f64,
+    max_rho: f64,
+    /// Every acceleration and density rate is finite.
+    finite: bool,
+}
+
+impl Extremes {
+    fn of(v: &[Velocity], a: &[Acceleration], r: &[DensityRate], rho: &[Density]) -> Self {
+        let none = || Self {
+            max_v2: 0.0,
+            max_a2: 0.0,
+            max_rho: 0.0,
+            finite: true,
+        };
+        // max and && are order-independent: the same result for any thread count.
+        (v, a, r, rho)
+            .into_par_iter()
+            .with_min_len(4096)
+            .fold(none, |e, (v, a, r, rho)| Self {
+                max_v2: e.max_v2.max(v.0.length_squared()),
+                max_a2: e.max_a2.max(a.0.length_squared()),
+                max_rho: e.max_rho.max(rho.0),
+                finite: e.finite & a.0.is_finite() & r.0.is_finite(),
+            })
+            .reduce(none, |p, q| Self {
+                max_v2: p.max_v2.max(q.max_v2),
+                max_a2: p.max_a2.max(q.max_a2),
+                max_rho: p.max_rho.max(q.max_rho),
+                finite: p.finite & q.finite,
+            })
     }
 }
 
 impl Integrate {
-    /// Non-finite state, particles outside the domain or through a wall, density out of
-    /// bounds: the first offending particle (lowest index) is reported.
-    fn check(&self, sim: &Sim, x: &[Position], rho: &[Density]) -> Result<(), StepError> {
+    /// Why particle `i` (at `p`, density `r`) failed the end-of-step check.
+    fn diagnose(&self, sim: &Sim, i: usize, p: DVec2, r: f64) -> StepError {
         let (lo, hi) = sim.constants.domain;
-        let rho0 = sim.constants.eos.rho0;
         let limit = self.params.density_limit;
-        let bad = (0..x.len()).into_par_iter().find_first(|&i| {
-            let p = x[i].0;
-            !p.is_finite()
-                || !rho[i].0.is_finite()
-                || p.cmplt(lo).any()
-                || p.cmpgt(hi).any()
-                || (rho[i].0 / rho0 - 1.0).abs() > limit
-                || self.crossed_wall(p).is_some()
-        });
-        let Some(i) = bad else { return Ok(()) };
-        let p = x[i].0;
-        let what = if !p.is_finite() || !rho[i].0.is_finite() {
+        let what = if !p.is_finite() || !r.is_finite() {
             "non-finite position or density".to_string()
         } else if let Some(w) = self.crossed_wall(p) {
             format!("particle passed through wall `{w}`")
         } else if p.cmplt(lo).any() || p.cmpgt(hi).any() {
             "particle left the domain".to_string()
         } else {
-            format!(
-                "density {:.1} kg/m^3 is beyond rho_0 (1 +- {limit})",
-                rho[i].0
-            )
+            format!("density {r:.1} kg/m^3 is beyond rho_0 (1 +- {limit})")
         };
-        Err(unstable(&what, i, p))
+        unstable(&what, i, p)
     }
 
-    /// Reflects particles that ended the step behind a wall; returns how many. With
+    /// Reflects a particle that ended the step behind a wall (position mirrored, normal
+    /// velocity relative to the wall reversed); returns whether it did. With
     /// `restore_density_on_reflection`, `floor` (rho_0) is the reflected particle's
     /// least density; otherwise `floor` is 0 and densities are kept.
+    #[inline]
     fn reflect(
         &self,
         floor: f64,
-        x: &mut [Position],
-        v: &mut [Velocity],
-        vh: &mut [HalfVelocity],
-        rho: &mut [Density],
-        rh: &mut [HalfDensity],
-    ) -> usize {
-        (x, v, vh, rho, rh)
-            .into_par_iter()
-            .map(|(x, v, vh, rho, rh)| {
-                let mut hit = 0;
-                for w in self.walls.now() {
-                    let s = w.abscissa(x.0);
-                    let d = w.distance(x.0);
-                    if d < 0.0 && s > 0.0 && s < w.length() {
-                        let n = w.normal();
-                        let vw = w.velocity_at(x.0 - d * n);
-                        x.0 -= 2.0 * d * n;
-                        v.0 -= 2.0 * (v.0 - vw).dot(n).min(0.0) * n;
-                        vh.0 -= 2.0 * (vh.0 - vw).dot(n).min(0.0) * n;
-                        rho.0 = rho.0.max(floor);
-                        rh.0 = rh.0.max(floor);
-                        hit = 1;
-                    }
-                }
-                hit
-            })
-            .sum()
+        x: &mut Position,
+        v: &mut Velocity,
+        vh: &mut HalfVelocity,
+        rho: &mut Density,
+        rh: &mut HalfDensity,
+    ) -> bool {
+        let mut hit = false;
+        for (line, wall) in self.walls.lines().iter().zip(self.walls.now()) {
+            if line.behind(x.0) {
+                let (d, n) = (line.distance(x.0), line.normal);
+                let vw = wall.velocity_at(x.0 - d * n);
+                x.0 -= 2.0 * d * n;
+                v.0 -= 2.0 * (v.0 - vw).dot(n).min(0.0) * n;
+                vh.0 -= 2.0 * (vh.0 - vw).dot(n).min(0.0) * n;
+                rho.0 = rho.0.max(floor);
+                rh.0 = rh.0.max(floor);
+                hit = true;
+            }
+        }
+        hit
     }
 
     /// The wall whose line the particle is behind while alongside the wall.
+    #[inline]
     fn crossed_wall(&self, p: DVec2) -> Option<&str> {
-        self.walls
-            .now()
-            .iter()
-            .find(|w: &&Wall| {
-                let s = w.abscissa(p);
-                w.distance(p) < 0.0 && s > 0.0 && s < w.length()
-            })
-            .map(|w| w.name.as_str())
+        let k = self.walls.lines().iter().position(|l| l.behind(p))?;
+        Some(self.walls.now()[k].name.as_str())
     }
 }
 

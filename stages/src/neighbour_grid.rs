@@ -66,6 +66,15 @@ pub struct NeighbourGrid {
     sort: SortScratch,
 }
 
+/// Cells per kernel support. With 2 (cells of half the support searched 5 x 5, an
+/// area of (2.5 r_s)^2 instead of (3 r_s)^2) about 30 % fewer candidates are
+/// distance-tested, but the grid has four times the cells, whose counting sort eats
+/// the gain: measured at 80k, 5 % less user time in this stage and 1 % overall, for
+/// about 15 more bytes per particle. So 1.
+const REACH: usize = 1;
+/// Rows (and columns) of cells searched around a particle.
+const ROWS: usize = 2 * REACH + 1;
+
 /// A uniform grid of cells over the domain, each listing the particles inside it.
 #[derive(Default)]
 pub struct CellGrid {
@@ -137,24 +146,24 @@ impl CellGrid {
             });
     }
 
-    /// The three index ranges (into `particles` / `xs`) of the 3x3 cells around `x`,
-    /// in the fixed order (rows bottom to top).
+    /// The index ranges (into `particles` / `xs`) of the `ROWS` x `ROWS` cells around
+    /// `x`, one per row of cells, in the fixed order (rows bottom to top).
     #[inline(always)]
-    fn ranges_near(&self, x: DVec2) -> [std::ops::Range<usize>; 3] {
+    fn ranges_near(&self, x: DVec2) -> [std::ops::Range<usize>; ROWS] {
         let (cx, cy) = self.cell_of(x);
-        let (x0, x1) = (cx.saturating_sub(1), (cx + 1).min(self.nx - 1));
-        let row = |y: usize| {
-            let r = y * self.nx;
+        let (x0, x1) = (cx.saturating_sub(REACH), (cx + REACH).min(self.nx - 1));
+        std::array::from_fn(|k| {
+            let y = cy + k;
+            if y < REACH || y - REACH >= self.ny {
+                return 0..0;
+            }
+            let r = (y - REACH) * self.nx;
             self.start[r + x0] as usize..self.start[r + x1 + 1] as usize
-        };
-        [
-            if cy > 0 { row(cy - 1) } else { 0..0 },
-            row(cy),
-            if cy + 1 < self.ny { row(cy + 1) } else { 0..0 },
-        ]
+        })
     }
 
-    /// Calls `f(j)` for every particle in the 3x3 cells around `x`, in the fixed order.
+    /// Calls `f(j)` for every particle within one support of `x` or a little farther
+    /// (the cells around it), in the fixed order.
     #[inline]
     pub fn for_each_near(&self, x: DVec2, mut f: impl FnMut(u32)) {
         if self.start.is_empty() {
@@ -246,7 +255,7 @@ impl NeighbourGrid {
         // The grid must also cover ghosts, which lie up to one support outside the walls.
         let (lo, hi) = sim.constants.domain;
         let pad = DVec2::splat(support);
-        nb.grid.shape((lo - pad, hi + pad), support);
+        nb.grid.shape((lo - pad, hi + pad), support / REACH as f64);
         if self.sort_every > 0 && self.calls.is_multiple_of(self.sort_every as u64) {
             let grid = &nb.grid;
             let sorted = sort_by_cell(

@@ -1,6 +1,8 @@
 //! The optimised paths give the same physics as the straightforward ones: a dam break
 //! whose particles are re-sorted by cell every step (`NeighbourGrid(sort_every: 1)`)
-//! against one that keeps creation order (`sort_every: 0`).
+//! against one that keeps creation order (`sort_every: 0`); and the continuity
+//! equation summed inside the forces loop (`Forces(with_continuity: true)`, as shipped)
+//! against a separate `Continuity()` stage, which must agree bit for bit.
 //!
 //! Sorting changes only the order in which neighbour terms are summed, so the two runs
 //! differ by round-off, which the flow then amplifies a little. Over 0.15 s (the
@@ -18,6 +20,10 @@ use sph_tests::support::{load, read_csv, run_completed};
 const SCENE: &str = include_str!("../../scenarios/dam_break.ron");
 
 fn run(sort_every: u32) -> (Sim, std::path::PathBuf) {
+    run_scene(SCENE, sort_every, &format!("sort{sort_every}"))
+}
+
+fn run_scene(scene: &str, sort_every: u32, tag: &str) -> (Sim, std::path::PathBuf) {
     let sort = format!("pipeline.neighbour_grid.sort_every={sort_every}");
     let overrides = [
         "resolution=ParticlesAcross(40)",
@@ -28,11 +34,8 @@ fn run(sort_every: u32) -> (Sim, std::path::PathBuf) {
         "pipeline.energy.plots=false",
         &sort,
     ];
-    let (summary, sim, out) = run_completed(
-        load(SCENE, "scenarios/dam_break.ron", &overrides),
-        &format!("sort{sort_every}"),
-        2,
-    );
+    let (summary, sim, out) =
+        run_completed(load(scene, "scenarios/dam_break.ron", &overrides), tag, 2);
     assert!(summary.steps > 100, "{} steps", summary.steps);
     assert!(!summary.diagnostics.contains_key("cell_sort_skipped"));
     (sim, out)
@@ -114,4 +117,51 @@ fn cell_sorting_changes_results_only_by_round_off() {
     for dir in [plain_out, sorted_out] {
         let _ = std::fs::remove_dir_all(dir);
     }
+}
+
+#[test]
+fn continuity_in_the_forces_loop_is_bit_identical_to_the_separate_stage() {
+    let fused = "with_continuity: true";
+    assert!(
+        SCENE.contains(fused),
+        "dam_break.ron no longer fuses continuity"
+    );
+    let forces = SCENE.find("        Forces(").expect("a Forces stage");
+    let separate = format!(
+        "{}        Continuity(),\n{}",
+        &SCENE[..forces],
+        SCENE[forces..].replacen(fused, "with_continuity: false", 1)
+    );
+    let (a, a_out) = run_scene(SCENE, 20, "fused");
+    let (b, b_out) = run_scene(&separate, 20, "separate");
+    // Same terms summed in the same order: every bit equal.
+    let (sa, sb) = (state_by_id(&a), state_by_id(&b));
+    assert!(sa.len() > 100);
+    for (p, q) in sa.iter().zip(&sb) {
+        assert_eq!(p, q, "particle state differs");
+    }
+    let read = |d: &std::path::Path| std::fs::read_to_string(d.join("probes.csv")).unwrap();
+    assert_eq!(read(&a_out), read(&b_out), "probes.csv differs");
+    for dir in [a_out, b_out] {
+        let _ = std::fs::remove_dir_all(dir);
+    }
+}
+
+#[test]
+fn continuity_written_twice_is_refused_at_setup() {
+    let forces = SCENE.find("        Forces(").expect("a Forces stage");
+    let both = format!(
+        "{}        Continuity(),\n{}",
+        &SCENE[..forces],
+        &SCENE[forces..]
+    );
+    let scenario = load(&both, "both.ron", &["end_time=0.001"]);
+    let opts = sph_core::runner::RunOptions {
+        out_dir: sph_tests::support::temp_out("both"),
+        threads: Some(1),
+        ..Default::default()
+    };
+    let err = sph_core::runner::run(scenario, &opts).expect_err("both write the density rate");
+    assert!(err.to_string().contains("remove one of them"), "{err}");
+    let _ = std::fs::remove_dir_all(&opts.out_dir);
 }

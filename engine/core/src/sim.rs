@@ -28,21 +28,35 @@ pub struct Tait {
     pub c0: f64,
     pub gamma: f64,
     pub b: f64,
+    /// gamma when it is a whole number from 1 to 12 (7 is usual): the powers are then
+    /// taken by multiplication, several times cheaper than `powf`.
+    whole_gamma: Option<u32>,
 }
 
 impl Tait {
     pub fn new(rho0: f64, c0: f64, gamma: f64) -> Self {
+        let whole = gamma.fract() == 0.0 && (1.0..=12.0).contains(&gamma);
         Self {
             rho0,
             c0,
             gamma,
             b: rho0 * c0 * c0 / gamma,
+            whole_gamma: whole.then_some(gamma as u32),
+        }
+    }
+    /// (rho/rho_0)^(gamma - k) for k = 0 or 1.
+    #[inline(always)]
+    fn ratio_pow(&self, rho: f64, k: u32) -> f64 {
+        let x = rho / self.rho0;
+        match self.whole_gamma {
+            Some(n) => whole_pow(x, n - k),
+            None => x.powf(self.gamma - k as f64),
         }
     }
     /// p(rho).
     #[inline(always)]
     pub fn pressure(&self, rho: f64) -> f64 {
-        self.b * ((rho / self.rho0).powf(self.gamma) - 1.0)
+        self.b * (self.ratio_pow(rho, 0) - 1.0)
     }
     /// rho(p), the inverse of [`Tait::pressure`]. Tension beyond -B has no density; it
     /// maps to the smallest positive one, rho_0 1e-12^(1/gamma) (a ghost of a spray
@@ -60,7 +74,66 @@ impl Tait {
     /// Speed of sound at density rho: c^2 = dp/drho.
     #[inline(always)]
     pub fn sound_speed(&self, rho: f64) -> f64 {
-        (self.c0 * self.c0 * (rho / self.rho0).powf(self.gamma - 1.0)).sqrt()
+        (self.c0 * self.c0 * self.ratio_pow(rho, 1)).sqrt()
+    }
+}
+
+/// x^n by multiplication (n small): the usual exponents (4 for the artificial
+/// pressure, 6 and 7 for Tait with gamma = 7) written out, others by repeated squaring.
+#[inline(always)]
+pub fn whole_pow(x: f64, n: u32) -> f64 {
+    match n {
+        4 => {
+            let x2 = x * x;
+            return x2 * x2;
+        }
+        6 => {
+            let x3 = x * x * x;
+            return x3 * x3;
+        }
+        7 => {
+            let x3 = x * x * x;
+            return x3 * x3 * x;
+        }
+        _ => {}
+    }
+    let (mut base, mut e, mut out) = (x, n, 1.0);
+    while e > 0 {
+        if e & 1 == 1 {
+            out *= base;
+        }
+        base *= base;
+        e >>= 1;
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn whole_powers_match_powf() {
+        for n in 0..=12 {
+            for x in [0.3, 0.97, 1.0, 1.013, 2.5] {
+                let (a, b) = (whole_pow(x, n), f64::powf(x, n as f64));
+                assert!(
+                    (a - b).abs() <= 8.0 * f64::EPSILON * b,
+                    "{x}^{n}: {a} vs {b}"
+                );
+            }
+        }
+        let (whole, general) = (
+            Tait::new(1000.0, 20.0, 7.0),
+            Tait::new(1000.0, 20.0, 7.0 + 1e-12),
+        );
+        assert!(whole.whole_gamma.is_some() && general.whole_gamma.is_none());
+        for rho in [950.0, 1000.0, 1030.0] {
+            let (p, q) = (whole.pressure(rho), general.pressure(rho));
+            assert!((p - q).abs() < 1e-6 * whole.b, "{p} vs {q}");
+            let (c, d) = (whole.sound_speed(rho), general.sound_speed(rho));
+            assert!((c - d).abs() < 1e-9 * c, "{c} vs {d}");
+        }
     }
 }
 

@@ -5,6 +5,7 @@
 
 use crate::components::{Tank, Wall};
 use crate::motion::{Motion, Pose};
+use glam::DVec2;
 use hecs::World;
 
 #[derive(Clone, Debug, Default)]
@@ -14,6 +15,53 @@ pub struct WallSet {
     motion: Option<Motion>,
     pose: Pose,
     now: Vec<Wall>,
+    /// `now` as lines with unit normal and tangent, for per-particle tests.
+    lines: Vec<WallLine>,
+}
+
+/// A wall's line at an instant with its unit normal and tangent and its length worked
+/// out once, so the per-particle tests (ghost placement, wall crossing) do not
+/// normalise per call as [`Wall::distance`] does.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct WallLine {
+    pub a: DVec2,
+    /// Unit normal pointing into the fluid.
+    pub normal: DVec2,
+    /// Unit tangent from a to b.
+    pub tangent: DVec2,
+    pub length: f64,
+}
+
+impl WallLine {
+    pub fn of(w: &Wall) -> Self {
+        Self {
+            a: w.a,
+            normal: w.normal(),
+            tangent: w.tangent(),
+            length: w.length(),
+        }
+    }
+    /// Signed distance of `x` from the line, positive on the fluid side.
+    #[inline(always)]
+    pub fn distance(&self, x: DVec2) -> f64 {
+        (x - self.a).dot(self.normal)
+    }
+    /// Abscissa of the projection of `x`, 0 at `a`, `length` at `b`.
+    #[inline(always)]
+    pub fn abscissa(&self, x: DVec2) -> f64 {
+        (x - self.a).dot(self.tangent)
+    }
+    /// Whether `x` is behind the wall while strictly alongside it (it has crossed it).
+    #[inline(always)]
+    pub fn behind(&self, x: DVec2) -> bool {
+        let s = self.abscissa(x);
+        self.distance(x) < 0.0 && s > 0.0 && s < self.length
+    }
+    /// Mirror image of `x` across the line.
+    #[inline(always)]
+    pub fn mirror(&self, x: DVec2) -> DVec2 {
+        x - 2.0 * self.distance(x) * self.normal
+    }
 }
 
 impl WallSet {
@@ -33,6 +81,7 @@ impl WallSet {
             .map(|(t, m)| (t.pivot, m.cloned()))
             .unwrap_or_default();
         Self {
+            lines: rest.iter().map(WallLine::of).collect(),
             now: rest.clone(),
             rest,
             motion,
@@ -58,6 +107,10 @@ impl WallSet {
     pub fn now(&self) -> &[Wall] {
         &self.now
     }
+    /// [`WallSet::now`] as lines.
+    pub fn lines(&self) -> &[WallLine] {
+        &self.lines
+    }
     /// The tank's pose as last computed.
     pub fn pose(&self) -> Pose {
         self.pose
@@ -67,10 +120,11 @@ impl WallSet {
     pub fn at(&mut self, t: f64) -> &[Wall] {
         if let Some(m) = &self.motion {
             self.pose = m.pose(t);
-            for (now, rest) in self.now.iter_mut().zip(&self.rest) {
+            for ((now, line), rest) in self.now.iter_mut().zip(&mut self.lines).zip(&self.rest) {
                 now.a = self.pose.to_world(rest.a);
                 now.b = self.pose.to_world(rest.b);
                 now.body = self.pose;
+                *line = WallLine::of(now);
             }
         }
         &self.now
