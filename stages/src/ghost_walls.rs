@@ -70,11 +70,13 @@ pub fn register(registry: &mut StageRegistry) {
 }
 
 /// Ghost settings later stages need to refresh ghost densities.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug, Default)]
 pub struct GhostSettings {
     pub hydrostatic: bool,
-    /// The tank's pose when the ghosts were placed.
-    pub pose: Pose,
+    /// Each wall's body pose when the ghosts were placed (the tank's, or a piston's).
+    pub poses: Vec<Pose>,
+    /// The wall each ghost was (first) mirrored across, in ghost order.
+    pub wall_of_ghost: Vec<u16>,
 }
 
 pub struct GhostWalls {
@@ -112,30 +114,37 @@ impl Stage for GhostWalls {
                 "the scenario has no walls; remove GhostWalls() or add a `tank` or `walls`",
             ));
         }
-        let near = |a: DVec2, b: DVec2| (a - b).length() < 1e-9;
+        // Walls meet where an end of one lies on the other (a corner, or a piston
+        // standing on the floor).
+        let on = |p: DVec2, w: &Wall| {
+            let s = w.abscissa(p);
+            w.distance(p).abs() < 1e-9 && s > -1e-9 && s < w.length() + 1e-9
+        };
         let rest = self.walls.rest();
         for i in 0..rest.len() {
             for j in i + 1..rest.len() {
                 let (u, v) = (&rest[i], &rest[j]);
-                if near(u.a, v.a) || near(u.a, v.b) || near(u.b, v.a) || near(u.b, v.b) {
+                if on(u.a, v) || on(u.b, v) || on(v.a, u) || on(v.b, u) {
                     self.corners.push((i, j));
                 }
             }
         }
         sim.resources.insert(GhostSettings {
             hydrostatic: self.params.hydrostatic,
-            pose: self.walls.pose(),
+            ..GhostSettings::default()
         });
         Ok(())
     }
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
         self.walls.at(sim.clock.time);
-        let pose = self.walls.pose();
-        if let Some(s) = sim.resources.get_mut::<GhostSettings>() {
-            s.pose = pose;
-        }
         self.find_images(sim)?;
+        if let Some(s) = sim.resources.get_mut::<GhostSettings>() {
+            s.poses.clear();
+            s.poses.extend(self.walls.now().iter().map(|w| w.body));
+            s.wall_of_ghost.clear();
+            s.wall_of_ghost.extend(self.images.iter().map(|i| i.first));
+        }
         let images = &self.images[..];
         resize_pool(&mut sim.world, images.len());
         let Some(fluid) = archetype::<Fluid>(&sim.world) else {
@@ -154,10 +163,10 @@ impl Stage for GhostWalls {
         let (mut gr, mut gm) = (column_mut::<Density>(ghost)?, column_mut::<Mass>(ghost)?);
         let (fx, fv, fr, fm): (&[Position], &[Velocity], &[Density], &[Mass]) =
             (&fx, &fv, &fr, &fm);
-        let correction =
-            self.params
-                .hydrostatic
-                .then_some((sim.constants.eos, sim.constants.gravity, pose));
+        let correction = self
+            .params
+            .hydrostatic
+            .then_some((sim.constants.eos, sim.constants.gravity));
         let (walls, lines) = (self.walls.now(), self.walls.lines());
         let slip = self.params.slip;
         (
@@ -181,7 +190,8 @@ impl Stage for GhostWalls {
                 x.0 = pos;
                 v.0 = vel;
                 m.0 = fm[s].0;
-                rho.0 = ghost_density(fr[s].0, fx[s].0, pos, correction);
+                let body = walls[img.first as usize].body;
+                rho.0 = ghost_density(fr[s].0, fx[s].0, pos, correction.map(|c| (c, body)));
             });
         Ok(())
     }
@@ -251,16 +261,16 @@ fn mirror_velocity(line: &WallLine, w: &Wall, x: DVec2, v: DVec2, slip: Slip) ->
 }
 
 /// Ghost density: the source's, or with the hydrostatic correction the density whose
-/// pressure is p_source + rho_0 (g - a_w) . (x_ghost - x_source), a_w the tank's
-/// acceleration at the source.
+/// pressure is p_source + rho_0 (g - a_w) . (x_ghost - x_source), a_w the acceleration
+/// at the source of the body (tank or piston) whose wall it was mirrored across.
 fn ghost_density(
     rho_source: f64,
     source: DVec2,
     ghost: DVec2,
-    correction: Option<(Tait, DVec2, Pose)>,
+    correction: Option<((Tait, DVec2), Pose)>,
 ) -> f64 {
     match correction {
-        Some((eos, g, pose)) => {
+        Some(((eos, g), pose)) => {
             let g_eff = g - pose.acceleration_at(source);
             eos.density(eos.pressure(rho_source) + eos.rho0 * g_eff.dot(ghost - source))
         }
@@ -305,20 +315,25 @@ pub fn refresh_ghost_density(sim: &Sim) -> Result<(), StepError> {
     ) else {
         return Ok(());
     };
-    let correction = sim
+    let settings = sim
         .resources
         .get::<GhostSettings>()
-        .filter(|s| s.hydrostatic)
-        .map(|s| (sim.constants.eos, sim.constants.gravity, s.pose));
+        .filter(|s| s.hydrostatic);
+    let eos_g = (sim.constants.eos, sim.constants.gravity);
     let (fx, fr) = (column::<Position>(fluid)?, column::<Density>(fluid)?);
     let (gs, gx) = (column::<Ghost>(ghost)?, column::<Position>(ghost)?);
     let mut gr = column_mut::<Density>(ghost)?;
     let (fx, fr): (&[Position], &[Density]) = (&fx, &fr);
     (&mut gr[..], &gs[..], &gx[..])
         .into_par_iter()
-        .for_each(|(rho, g, x)| {
+        .enumerate()
+        .for_each(|(k, (rho, g, x))| {
             let s = g.source as usize;
-            rho.0 = ghost_density(fr[s].0, fx[s].0, x.0, correction);
+            let body = settings.and_then(|st| {
+                let wall = *st.wall_of_ghost.get(k)? as usize;
+                st.poses.get(wall).copied()
+            });
+            rho.0 = ghost_density(fr[s].0, fx[s].0, x.0, body.map(|b| (eos_g, b)));
         });
     Ok(())
 }

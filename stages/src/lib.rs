@@ -8,6 +8,7 @@
 //! `Integrate` advances the state, then `Energy`, `VtkFrames` and `Snapshots` report.
 
 pub mod continuity;
+pub mod damping_zone;
 pub mod energy;
 pub mod eos;
 pub mod forces;
@@ -34,6 +35,7 @@ pub fn register_standard(registry: &mut StageRegistry) {
     forces::register(registry);
     probe::register(registry);
     integrate::register(registry);
+    damping_zone::register(registry);
     energy::register(registry);
     vtk_frames::register(registry);
     snapshots::register(registry);

@@ -35,6 +35,7 @@ use sph_core::components::{
 };
 use sph_core::kernel;
 use sph_core::motion::Pose;
+use sph_core::piston::PISTON_WALL;
 use sph_core::series::SeriesWriter;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
@@ -83,6 +84,11 @@ pub struct Params {
     /// Roll angle [deg] and the liquid's roll moment about the tank pivot [N m per m
     /// of depth]; needs a tank and Forces before Probe. Default false.
     pub roll_moment: bool,
+    /// Piston displacement from its rest position [m] (`piston_x`) and the fluid's
+    /// horizontal force on the paddle [N per m of depth] (`piston_force`): Method I
+    /// pressure integrated over the paddle at ds intervals. Needs a `piston`. Default
+    /// false.
+    pub piston: bool,
     /// Draw PNG plots of the series at the end of the run. Default true.
     pub plots: bool,
 }
@@ -98,6 +104,7 @@ impl Default for Params {
             max_speed: false,
             neighbours: false,
             roll_moment: false,
+            piston: false,
             plots: true,
         }
     }
@@ -171,6 +178,15 @@ impl Stage for Probe {
                         .into(),
                 ));
             }
+        }
+        if self.params.piston && self.piston_wall().is_none() {
+            return Err(err("piston: true needs a `piston` in the scenario".into()));
+        }
+        if self.params.piston && !sim.resources.contains::<Neighbours>() {
+            return Err(err(
+                "the piston force needs the neighbour grid: put NeighbourGrid() before Probe()"
+                    .into(),
+            ));
         }
         let columns = self.columns();
         if columns.is_empty() {
@@ -274,6 +290,20 @@ impl Stage for Probe {
                 &["roll_moment"],
             )?;
         }
+        if self.params.piston {
+            out.plot(
+                &dir.join("probe_piston_x.png"),
+                &title("piston displacement"),
+                "x [m]",
+                &["piston_x"],
+            )?;
+            out.plot(
+                &dir.join("probe_piston_force.png"),
+                &title("force on the piston"),
+                "force [N / m]",
+                &["piston_force"],
+            )?;
+        }
         if self.params.neighbours {
             let names = ["neighbours_min", "neighbours_mean", "neighbours_max"];
             out.plot(
@@ -312,6 +342,7 @@ impl Probe {
                 &["neighbours_min", "neighbours_mean", "neighbours_max"][..],
             ),
             (self.params.roll_moment, &["roll_angle", "roll_moment"][..]),
+            (self.params.piston, &["piston_x", "piston_force"][..]),
         ];
         for (on, names) in flags {
             if on {
@@ -335,7 +366,7 @@ impl Probe {
             let at = wall.point(s.along);
             let carry = Carry {
                 rho0: sim.constants.eos.rho0,
-                g: sim.constants.gravity - pose.acceleration_at(at),
+                g: sim.constants.gravity - wall.body.acceleration_at(at),
             };
             for m in &self.params.methods {
                 row.push(match m {
@@ -398,7 +429,27 @@ impl Probe {
                 sim.constants.gravity,
             ));
         }
+        if self.params.piston {
+            let k = self.piston_wall().unwrap_or(0);
+            let (wall, rest) = (&self.walls.now()[k], &self.walls.rest()[k]);
+            row.push(wall.a.x - rest.a.x);
+            // F = n_x * integral of p along the wetted paddle (midpoint rule, steps of
+            // about ds); dry points interpolate to 0.
+            let steps = (wall.length() / ds).ceil().max(1.0) as usize;
+            let step = wall.length() / steps as f64;
+            let mut force = 0.0;
+            for i in 0..steps {
+                let at = wall.point((i as f64 + 0.5) * step);
+                force += self.shepard(sim, particles, at)? * step;
+            }
+            row.push(force * -wall.normal().x);
+        }
         Ok(row)
+    }
+
+    /// Index of the piston's wall.
+    fn piston_wall(&self) -> Option<usize> {
+        self.walls.rest().iter().position(|w| w.name == PISTON_WALL)
     }
 
     /// Method I: Shepard interpolation of fluid and ghost pressures at `at`.

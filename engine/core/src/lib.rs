@@ -9,6 +9,7 @@ pub mod linear_sloshing;
 pub mod motion;
 pub mod output;
 pub mod overrides;
+pub mod piston;
 pub mod registry;
 pub mod runner;
 pub mod scenario;
@@ -17,6 +18,7 @@ pub mod sim;
 pub mod stage;
 pub mod sweep;
 pub mod walls;
+pub mod waves;
 pub mod world;
 
 pub use registry::StageRegistry;

@@ -136,63 +136,104 @@ pub struct MotionSeries {
 }
 
 impl MotionSeries {
-    /// Reads `time, angle[deg][, x, y]` rows. Errors name the line.
-    pub fn read(path: &Path) -> Result<Self, String> {
+    /// Reads `time, angle[deg][, x, y]` rows (a tank), or with `positions` `time, x`
+    /// rows (a piston's displacement [m]). Errors name the line.
+    pub fn read(path: &Path, positions: bool) -> Result<Self, String> {
         let text = std::fs::read_to_string(path)
             .map_err(|e| format!("cannot read motion series {}: {e}", path.display()))?;
-        Self::parse(&text).map_err(|e| format!("{}: {e}", path.display()))
+        let parsed = if positions {
+            Self::parse_positions(&text)
+        } else {
+            Self::parse(&text)
+        };
+        parsed.map_err(|e| format!("{}: {e}", path.display()))
     }
 
+    /// `time [s], x [m]` rows: a horizontal displacement, no rotation.
+    pub fn parse_positions(text: &str) -> Result<Self, String> {
+        let (t, rows) = parse_rows(text, &[2], "time [s], position [m]")?;
+        let x = rows.iter().map(|r| r[1]).collect();
+        Ok(Self {
+            values: [vec![0.0; t.len()], x, vec![0.0; t.len()]],
+            t,
+        })
+    }
+
+    /// `time [s], angle [deg][, x [m], y [m]]` rows.
     pub fn parse(text: &str) -> Result<Self, String> {
-        let mut t = Vec::new();
-        let mut values: [Vec<f64>; 3] = Default::default();
-        let mut header_seen = false;
-        for (n, line) in text.lines().enumerate() {
-            let line = line.trim();
-            if line.is_empty() || line.starts_with('#') {
+        let (t, rows) = parse_rows(text, &[2, 4], "time [s], angle [deg][, x [m], y [m]]")?;
+        let col = |k: usize| rows.iter().map(move |r| r.get(k).copied().unwrap_or(0.0));
+        Ok(Self {
+            values: [
+                col(1).map(f64::to_radians).collect(),
+                col(2).collect(),
+                col(3).collect(),
+            ],
+            t,
+        })
+    }
+}
+
+/// Numeric rows of a motion table with one of the `widths` (time first, strictly
+/// increasing); `#` comments and one header line allowed. Errors name the line and say
+/// what is accepted (`columns`).
+fn parse_rows(
+    text: &str,
+    widths: &[usize],
+    columns: &str,
+) -> Result<(Vec<f64>, Vec<Vec<f64>>), String> {
+    let mut t = Vec::new();
+    let mut rows = Vec::new();
+    let mut header_seen = false;
+    for (n, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let cells: Vec<&str> = line
+            .split([',', ';', '\t', ' '])
+            .filter(|c| !c.is_empty())
+            .collect();
+        let numbers: Result<Vec<f64>, _> = cells.iter().map(|c| c.parse::<f64>()).collect();
+        let Ok(numbers) = numbers else {
+            if t.is_empty() && !header_seen {
+                header_seen = true;
                 continue;
             }
-            let cells: Vec<&str> = line
-                .split([',', ';', '\t', ' '])
-                .filter(|c| !c.is_empty())
-                .collect();
-            let numbers: Result<Vec<f64>, _> = cells.iter().map(|c| c.parse::<f64>()).collect();
-            let Ok(numbers) = numbers else {
-                if t.is_empty() && !header_seen {
-                    header_seen = true;
-                    continue;
-                }
-                return Err(format!(
-                    "line {}: `{line}` is not a row of numbers; accepted: time [s], angle [deg][, x [m], y [m]]",
-                    n + 1
-                ));
-            };
-            if !(numbers.len() == 2 || numbers.len() == 4) || numbers.iter().any(|v| !v.is_finite())
-            {
-                return Err(format!(
-                    "line {}: {} values; accepted: 2 (time, angle) or 4 (time, angle, x, y) finite numbers",
-                    n + 1,
-                    numbers.len()
-                ));
-            }
-            if t.last().is_some_and(|&last| numbers[0] <= last) {
-                return Err(format!(
-                    "line {}: time {} does not increase",
-                    n + 1,
-                    numbers[0]
-                ));
-            }
-            t.push(numbers[0]);
-            values[0].push(numbers[1].to_radians());
-            values[1].push(numbers.get(2).copied().unwrap_or(0.0));
-            values[2].push(numbers.get(3).copied().unwrap_or(0.0));
+            return Err(format!(
+                "line {}: `{line}` is not a row of numbers; accepted: {columns}",
+                n + 1
+            ));
+        };
+        if !widths.contains(&numbers.len()) || numbers.iter().any(|v| !v.is_finite()) {
+            return Err(format!(
+                "line {}: {} values; accepted: {columns} ({} finite numbers)",
+                n + 1,
+                numbers.len(),
+                widths
+                    .iter()
+                    .map(|w| w.to_string())
+                    .collect::<Vec<_>>()
+                    .join(" or ")
+            ));
         }
-        if t.len() < 2 {
-            return Err("a motion series needs at least two rows".into());
+        if t.last().is_some_and(|&last| numbers[0] <= last) {
+            return Err(format!(
+                "line {}: time {} does not increase",
+                n + 1,
+                numbers[0]
+            ));
         }
-        Ok(Self { t, values })
+        t.push(numbers[0]);
+        rows.push(numbers);
     }
+    if t.len() < 2 {
+        return Err("a motion series needs at least two rows".into());
+    }
+    Ok((t, rows))
+}
 
+impl MotionSeries {
     /// (value, d/dt, d2/dt2) of column `k` at time `s`: cubic Hermite interpolation with
     /// finite-difference (Catmull-Rom) slopes, so velocity is continuous.
     fn at(&self, k: usize, s: f64) -> [f64; 3] {

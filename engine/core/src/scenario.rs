@@ -11,6 +11,7 @@ use crate::components::{Fluid, Mass, ParticleId, PressureSensor, Tank, WaveGauge
 use crate::kernel::KernelKind;
 use crate::motion::{Motion, MotionSeries, MotionSpec, Pose};
 use crate::overrides::{apply_overrides, Override};
+use crate::piston::{Piston, PistonSpec, PISTON_WALL};
 use crate::registry::{camel_case, snake_case, StageRegistry};
 use crate::sim::{Clock, Constants, Resources, Sim, Tait};
 use crate::stage::Stage;
@@ -220,6 +221,9 @@ pub struct ScenarioSpec {
     pub tank: Option<TankSpec>,
     #[serde(default)]
     pub walls: Vec<WallSpec>,
+    /// A piston wave maker (a moving vertical wall named `piston`).
+    #[serde(default)]
+    pub piston: Option<PistonSpec>,
     pub fluid_blocks: Vec<BlockSpec>,
     #[serde(default)]
     pub pressure_sensors: Vec<SensorSpec>,
@@ -454,6 +458,8 @@ pub struct Scenario {
     pub sound_speed: f64,
     /// The tank's motion, with its series read, if the tank moves.
     pub motion: Option<Motion>,
+    /// The piston's motion, if there is a piston.
+    pub piston: Option<Motion>,
     /// The file it came from.
     pub source: PathBuf,
 }
@@ -552,7 +558,7 @@ impl Scenario {
         }
     }
 
-    /// Walls of the scenario: the tank's then the extra ones.
+    /// Walls of the scenario: the tank's, the extra ones, then the piston.
     pub fn walls(&self) -> Vec<Wall> {
         let mut walls = Vec::new();
         if let Some(t) = &self.spec.tank {
@@ -576,6 +582,16 @@ impl Scenario {
                 a: s.from.into(),
                 b: s.to.into(),
                 body: Pose::default(),
+            });
+        }
+        if let Some(p) = &self.spec.piston {
+            let height = self.spec.tank.as_ref().map_or(0.0, |t| t.height.0);
+            let (a, b) = p.ends(height);
+            walls.push(Wall {
+                name: PISTON_WALL.into(),
+                a,
+                b,
+                body: Pose::at_rest(DVec2::new(p.x, 0.0)),
             });
         }
         walls
@@ -721,7 +737,10 @@ impl Scenario {
             },));
         }
         for w in walls {
-            world.spawn((w,));
+            match (&self.piston, w.name == PISTON_WALL) {
+                (Some(m), true) => world.spawn((w, Piston, m.clone())),
+                _ => world.spawn((w,)),
+            };
         }
         Sim {
             world,
@@ -811,18 +830,27 @@ fn validate(spec: ScenarioSpec, at: &Locator, source: PathBuf) -> Result<Scenari
         Some((tank, m)) => Some(motion(tank, m, at, &source)?),
         None => None,
     };
+    let piston = match &spec.piston {
+        Some(p) => Some(piston(&spec, p, at, &source)?),
+        None => None,
+    };
     let scenario = Scenario {
         h: spec.h_over_dx.0 * spacing,
         spacing,
         sound_speed,
         motion,
+        piston,
         spec,
         source,
     };
     let walls = scenario.walls();
-    // The tank's walls come first; the rest are the `walls` list's elements.
-    let tank_walls = walls.len() - scenario.spec.walls.len();
+    // The tank's walls come first, then the `walls` list's elements, then the piston.
+    let piston_walls = scenario.spec.piston.is_some() as usize;
+    let tank_walls = walls.len() - scenario.spec.walls.len() - piston_walls;
     let wall_place = |i: usize, key: &str| {
+        if i + piston_walls >= walls.len() && piston_walls > 0 {
+            return at.doc.key(&["piston"]);
+        }
         i.checked_sub(tank_walls)
             .and_then(|k| at.doc.element(&["walls"], k, key))
             .or_else(|| at.doc.key(&["walls"]))
@@ -956,6 +984,68 @@ fn validate(spec: ScenarioSpec, at: &Locator, source: PathBuf) -> Result<Scenari
     Ok(scenario)
 }
 
+/// The piston's motion, checked against the tank.
+fn piston(
+    spec: &ScenarioSpec,
+    p: &PistonSpec,
+    at: &Locator,
+    source: &Path,
+) -> Result<Motion, LoadError> {
+    let place = |key: &str| {
+        at.doc
+            .key(&["piston", key])
+            .or_else(|| at.doc.key(&["piston"]))
+    };
+    let Some(tank) = &spec.tank else {
+        return Err(at.error(
+            "piston",
+            place("x"),
+            "a piston needs a `tank` (it stands on the tank's floor)".into(),
+        ));
+    };
+    if tank.motion.is_some() {
+        return Err(at.error(
+            "piston",
+            place("x"),
+            "a piston in a moving tank is not supported; remove the tank's `motion` or the piston"
+                .into(),
+        ));
+    }
+    if !(p.x > 0.0 && p.x < tank.width.0) {
+        return Err(at.error(
+            "x",
+            place("x"),
+            format!(
+                "{} is out of range; accepted: inside the tank, 0 < x < {} m",
+                p.x, tank.width.0
+            ),
+        ));
+    }
+    if p.height.is_some_and(|h| h.0 > tank.height.0) {
+        return Err(at.error(
+            "height",
+            place("height"),
+            format!("accepted: up to the tank's height, {} m", tank.height.0),
+        ));
+    }
+    let m = p
+        .motion(source)
+        .map_err(|(field, message)| at.error(field, place(field), message))?;
+    // The paddle must stay in the tank: behind it is the tank's left wall.
+    if m.max_offset() >= p.x {
+        return Err(at.error(
+            "stroke",
+            place("stroke"),
+            format!(
+                "the paddle would travel {:.4} m back from x = {} m, through the tank's left wall; move `x` right or reduce the stroke",
+                m.max_offset(),
+                p.x
+            ),
+        ));
+    }
+    Ok(m)
+}
+
 /// The tank's motion, with its CSV series read (relative to the scenario file).
 fn motion(
     tank: &TankSpec,
@@ -978,7 +1068,10 @@ fn motion(
                 ));
             }
             let path = source.parent().unwrap_or(Path::new(".")).join(file);
-            Some(MotionSeries::read(&path).map_err(|e| at.error("series", place("series"), e))?)
+            Some(
+                MotionSeries::read(&path, false)
+                    .map_err(|e| at.error("series", place("series"), e))?,
+            )
         }
         None => None,
     };

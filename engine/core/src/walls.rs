@@ -1,7 +1,8 @@
 //! The walls at an instant: the tank-frame [`Wall`] components carried to the world by
-//! the tank's pose, each with the tank's velocity and acceleration. Stages that touch
-//! walls keep a `WallSet` and call [`WallSet::at`] for the time they work at; for a
-//! fixed tank it returns the stored walls unchanged.
+//! the tank's pose, each with the tank's velocity and acceleration; a wall entity with
+//! its own [`Motion`] (a piston) moves by that motion instead. Stages that touch walls
+//! keep a `WallSet` and call [`WallSet::at`] for the time they work at; when nothing
+//! moves it returns the stored walls unchanged.
 
 use crate::components::{Tank, Wall};
 use crate::motion::{Motion, Pose};
@@ -12,8 +13,11 @@ use hecs::World;
 pub struct WallSet {
     /// Tank-frame geometry, in the order walls were spawned (sensors index it).
     rest: Vec<Wall>,
+    /// The tank's motion and pose.
     motion: Option<Motion>,
     pose: Pose,
+    /// Walls with a motion of their own (a piston): (index, motion).
+    own: Vec<(usize, Motion)>,
     now: Vec<Wall>,
     /// `now` as lines with unit normal and tangent, for per-particle tests.
     lines: Vec<WallLine>,
@@ -67,26 +71,34 @@ impl WallLine {
 impl WallSet {
     /// The world's walls and, if the tank moves, its motion.
     pub fn from_world(world: &World) -> Self {
-        let mut walls: Vec<(hecs::Entity, Wall)> = world
-            .query::<(hecs::Entity, &Wall)>()
+        let mut walls: Vec<(hecs::Entity, Wall, Option<Motion>)> = world
+            .query::<(hecs::Entity, &Wall, Option<&Motion>)>()
             .iter()
-            .map(|(e, w)| (e, w.clone()))
+            .map(|(e, w, m)| (e, w.clone(), m.cloned()))
             .collect();
-        walls.sort_by_key(|(e, _)| e.id());
-        let rest: Vec<Wall> = walls.into_iter().map(|(_, w)| w).collect();
+        walls.sort_by_key(|(e, _, _)| e.id());
+        let own = walls
+            .iter()
+            .enumerate()
+            .filter_map(|(i, (_, _, m))| m.clone().map(|m| (i, m)))
+            .collect();
+        let rest: Vec<Wall> = walls.into_iter().map(|(_, w, _)| w).collect();
         let mut tank = world.query::<(&Tank, Option<&Motion>)>();
         let (pivot, motion) = tank
             .iter()
             .next()
             .map(|(t, m)| (t.pivot, m.cloned()))
             .unwrap_or_default();
-        Self {
+        let mut set = Self {
             lines: rest.iter().map(WallLine::of).collect(),
             now: rest.clone(),
             rest,
             motion,
             pose: Pose::at_rest(pivot),
-        }
+            own,
+        };
+        set.at(0.0);
+        set
     }
 
     pub fn is_empty(&self) -> bool {
@@ -95,9 +107,9 @@ impl WallSet {
     pub fn len(&self) -> usize {
         self.rest.len()
     }
-    /// Whether the walls move.
+    /// Whether any wall moves.
     pub fn moving(&self) -> bool {
-        self.motion.is_some()
+        self.motion.is_some() || !self.own.is_empty()
     }
     /// Tank-frame geometry.
     pub fn rest(&self) -> &[Wall] {
@@ -120,13 +132,23 @@ impl WallSet {
     pub fn at(&mut self, t: f64) -> &[Wall] {
         if let Some(m) = &self.motion {
             self.pose = m.pose(t);
-            for ((now, line), rest) in self.now.iter_mut().zip(&mut self.lines).zip(&self.rest) {
-                now.a = self.pose.to_world(rest.a);
-                now.b = self.pose.to_world(rest.b);
-                now.body = self.pose;
-                *line = WallLine::of(now);
+            for k in 0..self.rest.len() {
+                self.place(k, self.pose);
             }
         }
+        for j in 0..self.own.len() {
+            let (k, pose) = (self.own[j].0, self.own[j].1.pose(t));
+            self.place(k, pose);
+        }
         &self.now
+    }
+
+    /// Puts wall `k` where `pose` carries its rest geometry.
+    fn place(&mut self, k: usize, pose: Pose) {
+        let (now, rest) = (&mut self.now[k], &self.rest[k]);
+        now.a = pose.to_world(rest.a);
+        now.b = pose.to_world(rest.b);
+        now.body = pose;
+        self.lines[k] = WallLine::of(now);
     }
 }
