@@ -478,7 +478,10 @@ mod tests {
         let e = MotionSeries::parse("0,1\n0,2\n").unwrap_err();
         assert!(e.contains("does not increase"), "{e}");
         let e = MotionSeries::parse("0,1,2\n").unwrap_err();
-        assert!(e.contains("accepted: 2"), "{e}");
+        assert!(e.contains("line 1") && e.contains("2 or 4"), "{e}");
         assert!(MotionSeries::parse("0,1\n").is_err());
+        // A piston series takes exactly (time, position).
+        let e = MotionSeries::parse_positions("0,0\n1,0.1,3\n").unwrap_err();
+        assert!(e.contains("line 2") && e.contains("position"), "{e}");
     }
 }

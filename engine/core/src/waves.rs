@@ -50,6 +50,25 @@ pub fn wavenumber_from_phases(phase_up: f64, phase_down: f64, dx: f64) -> f64 {
     lag / dx
 }
 
+/// Incident and reflected wave amplitudes from two gauges (Goda & Suzuki 1976): the
+/// first harmonics (amplitude, phase) at x1 and x2 of eta = a_I sin(wt - kx + .) +
+/// a_R sin(wt + kx + .), with k the wavenumber; k (x2 - x1) must stay away from
+/// multiples of pi (a quarter wavelength apart is best). Returns (a_I, a_R).
+pub fn incident_reflected(g1: (f64, f64), g2: (f64, f64), k: f64, x1: f64, x2: f64) -> (f64, f64) {
+    // Complex amplitudes A(x) = I e^{-ikx} + R e^{ikx}, as (re, im) pairs.
+    type C = (f64, f64);
+    let mul = |a: C, b: C| (a.0 * b.0 - a.1 * b.1, a.0 * b.1 + a.1 * b.0);
+    let sub = |a: C, b: C| (a.0 - b.0, a.1 - b.1);
+    let cis = |t: f64| (t.cos(), t.sin());
+    let abs = |a: C| a.0.hypot(a.1);
+    let (a1, a2) = (mul((g1.0, 0.0), cis(g1.1)), mul((g2.0, 0.0), cis(g2.1)));
+    // Determinant 2i sin(k dx); only its modulus matters for the amplitudes.
+    let det = 2.0 * (k * (x2 - x1)).sin().abs();
+    let incident = sub(mul(a1, cis(k * x2)), mul(a2, cis(k * x1)));
+    let reflected = sub(mul(a2, cis(-k * x1)), mul(a1, cis(-k * x2)));
+    (abs(incident) / det, abs(reflected) / det)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -73,5 +92,24 @@ mod tests {
         let k_fit = wavenumber_from_phases(p1, p3, 1.415);
         assert!((k_fit / k - 1.0).abs() < 1e-9, "{k_fit}");
         assert!(mean_wave_height(&t, &g1, 3.0, 3.5).is_none());
+    }
+
+    #[test]
+    fn two_gauges_split_a_partly_reflected_wave() {
+        let (ai, ar, omega, k) = (0.027, 0.004, 2.0 * PI / 1.5, 2.22);
+        let t: Vec<f64> = (0..1200).map(|i| i as f64 * 0.01).collect();
+        let eta = |x: f64| -> Vec<f64> {
+            t.iter()
+                .map(|&t| ai * (omega * t - k * x).sin() + ar * (omega * t + k * x + 0.7).sin())
+                .collect()
+        };
+        let (x1, x2) = (2.0, 2.7075);
+        let h1 = harmonic(&t, &eta(x1), omega, 0.0, 12.0).unwrap();
+        let h2 = harmonic(&t, &eta(x2), omega, 0.0, 12.0).unwrap();
+        let (i, r) = incident_reflected(h1, h2, k, x1, x2);
+        assert!(
+            (i / ai - 1.0).abs() < 1e-9 && (r / ar - 1.0).abs() < 1e-9,
+            "{i} {r}"
+        );
     }
 }
