@@ -21,6 +21,9 @@ pub struct Params {
     pub pressure_range: Option<(f64, f64)>,
     /// Image width [px]. Default 1200.
     pub width: u32,
+    /// Draw only this rectangle ((x0, y0), (x1, y1)) [m], e.g. a plunging tip. Default:
+    /// the walls and all particles.
+    pub region: Option<((f64, f64), (f64, f64))>,
 }
 
 impl Default for Params {
@@ -29,6 +32,7 @@ impl Default for Params {
             times: Vec::new(),
             pressure_range: None,
             width: 1200,
+            region: None,
         }
     }
 }
@@ -46,6 +50,13 @@ pub fn register(registry: &mut StageRegistry) {
                     "field `width` = {} is out of range; accepted: 100 to 8000 pixels",
                     p.width
                 ));
+            }
+            if let Some(((x0, y0), (x1, y1))) = p.region {
+                if !(x1 > x0 && y1 > y0 && [x0, y0, x1, y1].iter().all(|v| v.is_finite())) {
+                    return Err(format!(
+                        "field `region` = (({x0}, {y0}), ({x1}, {y1})); accepted: ((x0, y0), (x1, y1)) with x1 > x0, y1 > y0 [m]"
+                    ));
+                }
             }
             p.times.sort_by(f64::total_cmp);
             Ok(Snapshots {
@@ -88,8 +99,17 @@ impl Stage for Snapshots {
             particles.fluid::<Position>()?,
             particles.fluid::<Pressure>()?,
         );
-        let positions: Vec<DVec2> = x.iter().map(|q| q.0).collect();
-        let values: Vec<f64> = p.iter().map(|q| q.0).collect();
+        let inside = |q: &DVec2| {
+            self.params.region.is_none_or(|((x0, y0), (x1, y1))| {
+                (x0..=x1).contains(&q.x) && (y0..=y1).contains(&q.y)
+            })
+        };
+        let (positions, values): (Vec<DVec2>, Vec<f64>) = x
+            .iter()
+            .zip(p.iter())
+            .map(|(q, p)| (q.0, p.0))
+            .filter(|(q, _)| inside(q))
+            .unzip();
         // Walls where they are now (a rolling tank's walls move).
         let mut set = WallSet::from_world(&sim.world);
         let walls: Vec<(DVec2, DVec2)> =
@@ -102,6 +122,9 @@ impl Stage for Snapshots {
         for q in &positions {
             lo = lo.min(*q);
             hi = hi.max(*q);
+        }
+        if let Some(((x0, y0), (x1, y1))) = self.params.region {
+            (lo, hi) = (DVec2::new(x0, y0), DVec2::new(x1, y1));
         }
         let c = &sim.constants;
         let range = self

@@ -112,6 +112,7 @@ pub fn run_scenario(args: &RunArgs, registry: &StageRegistry) -> Result<(), Stri
         progress: !args.quiet,
         trace: args.trace.clone(),
     };
+    let waves = sph_core::waves::WaveTheory::from_scenario(&scenario);
     let result = run(scenario, &opts);
     let summary = match &result {
         Ok(s) => s.clone(),
@@ -132,12 +133,33 @@ pub fn run_scenario(args: &RunArgs, registry: &StageRegistry) -> Result<(), Stri
         summary.threads,
         out_dir.display()
     );
+    if let (Some(waves), Ok(_)) = (&waves, &result) {
+        report_waves(waves, &out_dir)?;
+    }
     result.map(|_| ()).map_err(|e| {
         format!(
             "{e}\n(outputs written so far are kept in {})",
             out_dir.display()
         )
     })
+}
+
+/// A piston flume's gauges against Biesel and the dispersion relation: a line on the
+/// terminal and `waves.md` beside `probes.csv`.
+fn report_waves(
+    waves: &sph_core::waves::WaveTheory,
+    out_dir: &std::path::Path,
+) -> Result<(), String> {
+    let probes = out_dir.join("probes.csv");
+    if !probes.exists() {
+        return Ok(());
+    }
+    let report = waves.measure(&probes)?;
+    let path = out_dir.join("waves.md");
+    sph_core::output::atomic::write_atomic(&path, report.markdown().as_bytes())
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+    println!("{} (waves.md)", report.summary());
+    Ok(())
 }
 
 /// Runs a scenario's frequency sweep: cases side by side, one thread each.

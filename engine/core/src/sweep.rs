@@ -146,17 +146,21 @@ pub fn fit_harmonic(t: &[f64], y: &[f64], omega: f64) -> Option<(f64, f64)> {
     Some((a.hypot(b), b.atan2(a)))
 }
 
-/// Column `name` of a CSV with a `time` first column, from `from` on.
-fn read_column(path: &Path, name: &str, from: f64) -> Result<(Vec<f64>, Vec<f64>), String> {
+/// Column `name` of a CSV with a `time` first column, from `from` on; the error for a
+/// missing column names the probe option that writes it (`needs`).
+pub(crate) fn read_column(
+    path: &Path,
+    name: &str,
+    from: f64,
+    needs: &str,
+) -> Result<(Vec<f64>, Vec<f64>), String> {
     let mut reader =
         csv::Reader::from_path(path).map_err(|e| format!("{}: {e}", path.display()))?;
     let headers = reader.headers().map_err(|e| e.to_string())?.clone();
-    let k = headers.iter().position(|h| h == name).ok_or_else(|| {
-        format!(
-            "{}: no column `{name}`; add Probe(roll_moment: true)",
-            path.display()
-        )
-    })?;
+    let k = headers
+        .iter()
+        .position(|h| h == name)
+        .ok_or_else(|| format!("{}: no column `{name}`; add {needs}", path.display()))?;
     let (mut t, mut y) = (Vec::new(), Vec::new());
     for row in reader.records() {
         let row = row.map_err(|e| format!("{}: {e}", path.display()))?;
@@ -266,7 +270,12 @@ fn run_case(
         }
         Err(e) => return Err(e.to_string()),
     };
-    let (t, m) = read_column(&dir.join("probes.csv"), "roll_moment", 0.0)?;
+    let (t, m) = read_column(
+        &dir.join("probes.csv"),
+        "roll_moment",
+        0.0,
+        "Probe(roll_moment: true)",
+    )?;
     let theory = linear.roll_moment_history(
         axis_height,
         |s| {

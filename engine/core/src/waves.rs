@@ -1,9 +1,15 @@
 //! Regular-wave analysis of gauge records: wave height by zero up-crossings, and the
 //! first harmonic's amplitude and phase (least squares, [`crate::sweep::fit_harmonic`]),
-//! from which two gauges give the wavenumber. Used by the wave-maker validation.
+//! from which two gauges give the wavenumber, and the split of a gauge array into
+//! incident and reflected waves. [`WaveTheory`] compares a piston flume's gauges with
+//! Biesel's wave height and the dispersion relation (`waves.md` after a run).
 
-use crate::sweep::fit_harmonic;
+use crate::piston::{biesel_height_over_stroke, wavenumber};
+use crate::scenario::Scenario;
+use crate::sweep::{fit_harmonic, read_column};
 use std::f64::consts::PI;
+use std::fmt::Write as _;
+use std::path::Path;
 
 /// Mean crest-to-trough height of the complete waves (zero up-crossing to zero
 /// up-crossing about the window's mean level) in `t0 <= t <= t1`; None if the window
@@ -50,23 +56,307 @@ pub fn wavenumber_from_phases(phase_up: f64, phase_down: f64, dx: f64) -> f64 {
     lag / dx
 }
 
-/// Incident and reflected wave amplitudes from two gauges (Goda & Suzuki 1976): the
-/// first harmonics (amplitude, phase) at x1 and x2 of eta = a_I sin(wt - kx + .) +
-/// a_R sin(wt + kx + .), with k the wavenumber; k (x2 - x1) must stay away from
-/// multiples of pi (a quarter wavelength apart is best). Returns (a_I, a_R).
-pub fn incident_reflected(g1: (f64, f64), g2: (f64, f64), k: f64, x1: f64, x2: f64) -> (f64, f64) {
-    // Complex amplitudes A(x) = I e^{-ikx} + R e^{ikx}, as (re, im) pairs.
-    type C = (f64, f64);
-    let mul = |a: C, b: C| (a.0 * b.0 - a.1 * b.1, a.0 * b.1 + a.1 * b.0);
-    let sub = |a: C, b: C| (a.0 - b.0, a.1 - b.1);
-    let cis = |t: f64| (t.cos(), t.sin());
-    let abs = |a: C| a.0.hypot(a.1);
-    let (a1, a2) = (mul((g1.0, 0.0), cis(g1.1)), mul((g2.0, 0.0), cis(g2.1)));
-    // Determinant 2i sin(k dx); only its modulus matters for the amplitudes.
-    let det = 2.0 * (k * (x2 - x1)).sin().abs();
-    let incident = sub(mul(a1, cis(k * x2)), mul(a2, cis(k * x1)));
-    let reflected = sub(mul(a2, cis(-k * x1)), mul(a1, cis(-k * x2)));
-    (abs(incident) / det, abs(reflected) / det)
+/// A complex number, enough for the gauge-array algebra below.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Cplx(f64, f64);
+
+impl Cplx {
+    /// e^{i t}
+    fn cis(t: f64) -> Self {
+        Self(t.cos(), t.sin())
+    }
+    fn conj(self) -> Self {
+        Self(self.0, -self.1)
+    }
+    fn norm2(self) -> f64 {
+        self.0 * self.0 + self.1 * self.1
+    }
+}
+
+impl std::ops::Add for Cplx {
+    type Output = Self;
+    fn add(self, b: Self) -> Self {
+        Self(self.0 + b.0, self.1 + b.1)
+    }
+}
+
+impl std::ops::Sub for Cplx {
+    type Output = Self;
+    fn sub(self, b: Self) -> Self {
+        Self(self.0 - b.0, self.1 - b.1)
+    }
+}
+
+impl std::ops::Mul for Cplx {
+    type Output = Self;
+    fn mul(self, b: Self) -> Self {
+        Self(self.0 * b.0 - self.1 * b.1, self.0 * b.1 + self.1 * b.0)
+    }
+}
+
+impl std::ops::Div for Cplx {
+    type Output = Self;
+    fn div(self, b: Self) -> Self {
+        let n = b.norm2();
+        let p = self * b.conj();
+        Self(p.0 / n, p.1 / n)
+    }
+}
+
+/// First harmonic at one gauge: position x [m], amplitude [m] and phase [rad] of
+/// eta ~ a sin(omega t + phase) (as returned by [`harmonic`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GaugeHarmonic {
+    pub x: f64,
+    pub amplitude: f64,
+    pub phase: f64,
+}
+
+/// Incident and reflected waves fitted to a gauge array (Goda & Suzuki 1976 for two
+/// gauges, least squares of Mansard & Funke 1980 for more).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WaveSplit {
+    /// Amplitude of the wave travelling towards +x [m].
+    pub incident: f64,
+    /// Amplitude of the wave travelling towards -x [m].
+    pub reflected: f64,
+    /// Sum of squared misfits of the complex amplitudes [m^2]; zero for two gauges.
+    pub residual: f64,
+}
+
+/// Splits the first harmonics at the gauges into eta = a_I sin(wt - kx + .) +
+/// a_R sin(wt + kx + .) for wavenumber k, i.e. complex amplitudes
+/// A(x) = I e^{-ikx} + R e^{ikx}, by least squares. Gauge spacings with k dx a
+/// multiple of pi cannot separate the two (a quarter wavelength apart is best): None.
+pub fn incident_reflected(gauges: &[GaugeHarmonic], k: f64) -> Option<WaveSplit> {
+    // Normal equations [[n, s*], [s, n]] (I, R) = (b1, b2) with e = e^{-ikx}.
+    let n = gauges.len() as f64;
+    let (mut s, mut b1, mut b2) = (Cplx::default(), Cplx::default(), Cplx::default());
+    let data: Vec<(Cplx, Cplx)> = gauges
+        .iter()
+        .map(|g| {
+            (
+                Cplx::cis(-k * g.x),
+                Cplx(g.amplitude, 0.0) * Cplx::cis(g.phase),
+            )
+        })
+        .collect();
+    for &(e, a) in &data {
+        s = s + e * e;
+        b1 = b1 + e.conj() * a;
+        b2 = b2 + e * a;
+    }
+    let det = Cplx(n * n, 0.0) - s * s.conj();
+    if gauges.len() < 2 || det.norm2().sqrt() < 1e-9 * n * n {
+        return None;
+    }
+    let i = (Cplx(n, 0.0) * b1 - s.conj() * b2) / det;
+    let r = (Cplx(n, 0.0) * b2 - s * b1) / det;
+    let residual = data
+        .iter()
+        .map(|&(e, a)| (a - i * e - r * e.conj()).norm2())
+        .sum();
+    Some(WaveSplit {
+        incident: i.norm2().sqrt(),
+        reflected: r.norm2().sqrt(),
+        residual,
+    })
+}
+
+/// The wavenumber that best explains three or more gauges as an incident plus a
+/// reflected wave (least residual of [`incident_reflected`]), searched within
+/// `k_range`. Unlike a phase difference this is not biased by the partial standing wave
+/// a reflection makes.
+pub fn wavenumber_fit(gauges: &[GaugeHarmonic], k_range: (f64, f64)) -> Option<f64> {
+    let misfit = |k: f64| incident_reflected(gauges, k).map_or(f64::INFINITY, |w| w.residual);
+    // A fine scan finds the basin, golden sections refine it.
+    let steps = 400;
+    let dk = (k_range.1 - k_range.0) / steps as f64;
+    let best = (0..=steps)
+        .map(|j| k_range.0 + j as f64 * dk)
+        .min_by(|a, b| misfit(*a).total_cmp(&misfit(*b)))?;
+    let (mut lo, mut hi) = (best - dk, best + dk);
+    let phi = (5f64.sqrt() - 1.0) / 2.0;
+    for _ in 0..60 {
+        let (k1, k2) = (hi - phi * (hi - lo), lo + phi * (hi - lo));
+        if misfit(k1) < misfit(k2) {
+            hi = k2;
+        } else {
+            lo = k1;
+        }
+    }
+    let k = 0.5 * (lo + hi);
+    (gauges.len() >= 3 && misfit(k).is_finite()).then_some(k)
+}
+
+/// Linear theory for a flume driven by a sinusoidal piston (analytic.md section 5),
+/// and the gauges to compare with it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WaveTheory {
+    /// Still-water depth d [m] (the tallest fluid block).
+    pub depth: f64,
+    /// Angular frequency of the stroke [rad/s].
+    pub omega: f64,
+    /// Wavenumber of the dispersion relation omega^2 = g k tanh(k d) [1/m].
+    pub k: f64,
+    /// Biesel's first-order wave height H = S (H/S)(kd) [m].
+    pub height: f64,
+    /// Gauges (name, x [m]).
+    pub gauges: Vec<(String, f64)>,
+    /// Analysis window [s]: the last four periods of the run.
+    pub window: (f64, f64),
+}
+
+/// The measured waves against [`WaveTheory`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct WaveReport {
+    pub theory: WaveTheory,
+    /// Per gauge: (name, first-harmonic height 2a [m], mean zero-up-crossing height [m]).
+    pub heights: Vec<(String, f64, Option<f64>)>,
+    /// Wavenumber fitted to three or more gauges with the reflection accounted for.
+    pub k_fit: Option<f64>,
+    /// Incident and reflected amplitudes over all gauges at the theoretical k.
+    pub split: Option<WaveSplit>,
+}
+
+impl WaveTheory {
+    /// For a scenario with a sinusoidal piston and wave gauges; None otherwise.
+    pub fn from_scenario(scenario: &Scenario) -> Option<Self> {
+        let piston = scenario.spec.piston.as_ref()?;
+        let (stroke, period) = (piston.stroke?, piston.period?.0);
+        if scenario.spec.wave_gauges.is_empty() {
+            return None;
+        }
+        let depth = scenario.fluid_height();
+        let omega = 2.0 * PI / period;
+        let g = scenario.spec.fluid.gravity.1.abs();
+        let k = wavenumber(omega, depth, g);
+        let end = scenario.spec.end_time.0;
+        Some(Self {
+            depth,
+            omega,
+            k,
+            height: stroke.abs() * biesel_height_over_stroke(k * depth),
+            gauges: scenario
+                .spec
+                .wave_gauges
+                .iter()
+                .map(|g| (g.name.clone(), g.x))
+                .collect(),
+            window: ((end - 4.0 * period).max(0.0), end),
+        })
+    }
+
+    /// Reads the gauges from `probes.csv` and fits them over the window.
+    pub fn measure(&self, probes: &Path) -> Result<WaveReport, String> {
+        let (t0, t1) = self.window;
+        let mut heights = Vec::new();
+        let mut harmonics = Vec::new();
+        for (name, x) in &self.gauges {
+            let (t, eta) = read_column(probes, name, t0, "wave_gauges and a Probe()")?;
+            let (amplitude, phase) = harmonic(&t, &eta, self.omega, t0, t1).ok_or_else(|| {
+                format!(
+                    "{}: too few samples of {name} in {t0}..{t1} s",
+                    probes.display()
+                )
+            })?;
+            heights.push((
+                name.clone(),
+                2.0 * amplitude,
+                mean_wave_height(&t, &eta, t0, t1),
+            ));
+            harmonics.push(GaugeHarmonic {
+                x: *x,
+                amplitude,
+                phase,
+            });
+        }
+        Ok(WaveReport {
+            k_fit: wavenumber_fit(&harmonics, (0.5 * self.k, 1.5 * self.k)),
+            split: incident_reflected(&harmonics, self.k),
+            heights,
+            theory: self.clone(),
+        })
+    }
+}
+
+impl WaveReport {
+    /// Relative error of the fitted wavenumber against the dispersion relation.
+    pub fn k_error(&self) -> Option<f64> {
+        self.k_fit.map(|k| k / self.theory.k - 1.0)
+    }
+
+    /// Reflected over incident amplitude.
+    pub fn reflection(&self) -> Option<f64> {
+        self.split.map(|w| w.reflected / w.incident)
+    }
+
+    /// One line for the terminal.
+    pub fn summary(&self) -> String {
+        let th = &self.theory;
+        let mut line = format!("waves: Biesel H = {:.4} m;", th.height);
+        for (name, h, _) in &self.heights {
+            let _ = write!(line, " {name} {:+.1} %", 100.0 * (h / th.height - 1.0));
+        }
+        if let Some(e) = self.k_error() {
+            let _ = write!(line, "; k {:+.1} % of dispersion", 100.0 * e);
+        }
+        if let Some(r) = self.reflection() {
+            let _ = write!(line, "; reflection {:.2}", r);
+        }
+        line
+    }
+
+    /// `waves.md`: the comparison as a table, with the window and the methods.
+    pub fn markdown(&self) -> String {
+        let th = &self.theory;
+        let pct = |m: f64, t: f64| format!("{:+.1} %", 100.0 * (m / t - 1.0));
+        let mut md = format!(
+            "# Waves against linear theory\n\nWindow {:.2}-{:.2} s (the last four periods). \
+             Depth d = {:.4} m, omega = {:.4} rad/s; dispersion k = {:.4} 1/m \
+             (L = {:.4} m, kd = {:.3}); Biesel H = {:.4} m.\n\n\
+             | gauge | x [m] | H first harmonic [m] | error | H zero up-crossing [m] | error |\n\
+             |---|---|---|---|---|---|\n",
+            th.window.0,
+            th.window.1,
+            th.depth,
+            th.omega,
+            th.k,
+            2.0 * PI / th.k,
+            th.k * th.depth,
+            th.height
+        );
+        for ((name, h, hz), (_, x)) in self.heights.iter().zip(&th.gauges) {
+            let (zc, zc_err) = hz.map_or(("-".into(), "-".into()), |z| {
+                (format!("{z:.4}"), pct(z, th.height))
+            });
+            let _ = writeln!(
+                md,
+                "| {name} | {x:.4} | {h:.4} | {} | {zc} | {zc_err} |",
+                pct(*h, th.height)
+            );
+        }
+        if let Some(k) = self.k_fit {
+            let _ = write!(
+                md,
+                "\nWavenumber fitted to the gauges as incident plus reflected wave: k = {k:.4} 1/m \
+                 ({} of the dispersion relation).\n",
+                pct(k, th.k)
+            );
+        }
+        if let Some(w) = self.split {
+            let _ = write!(
+                md,
+                "\nIncident wave height {:.4} m ({} of Biesel), reflected {:.4} m: \
+                 reflection coefficient {:.3}.\n",
+                2.0 * w.incident,
+                pct(2.0 * w.incident, th.height),
+                2.0 * w.reflected,
+                w.reflected / w.incident
+            );
+        }
+        md
+    }
 }
 
 #[cfg(test)]
@@ -95,21 +385,33 @@ mod tests {
     }
 
     #[test]
-    fn two_gauges_split_a_partly_reflected_wave() {
+    fn gauges_split_a_partly_reflected_wave_and_give_its_wavenumber() {
         let (ai, ar, omega, k) = (0.027, 0.004, 2.0 * PI / 1.5, 2.22);
         let t: Vec<f64> = (0..1200).map(|i| i as f64 * 0.01).collect();
-        let eta = |x: f64| -> Vec<f64> {
-            t.iter()
+        let gauge = |x: f64| {
+            let eta: Vec<f64> = t
+                .iter()
                 .map(|&t| ai * (omega * t - k * x).sin() + ar * (omega * t + k * x + 0.7).sin())
-                .collect()
+                .collect();
+            let (amplitude, phase) = harmonic(&t, &eta, omega, 0.0, 12.0).unwrap();
+            GaugeHarmonic {
+                x,
+                amplitude,
+                phase,
+            }
         };
-        let (x1, x2) = (2.0, 2.7075);
-        let h1 = harmonic(&t, &eta(x1), omega, 0.0, 12.0).unwrap();
-        let h2 = harmonic(&t, &eta(x2), omega, 0.0, 12.0).unwrap();
-        let (i, r) = incident_reflected(h1, h2, k, x1, x2);
-        assert!(
-            (i / ai - 1.0).abs() < 1e-9 && (r / ar - 1.0).abs() < 1e-9,
-            "{i} {r}"
-        );
+        let g = [gauge(2.0), gauge(2.7075), gauge(3.415)];
+        // Two gauges: the exact Goda-Suzuki split.
+        let w = incident_reflected(&g[..2], k).unwrap();
+        assert!((w.incident / ai - 1.0).abs() < 1e-9, "{w:?}");
+        assert!((w.reflected / ar - 1.0).abs() < 1e-9, "{w:?}");
+        // Half a wavelength apart the two waves cannot be told apart.
+        assert!(incident_reflected(&[g[0], g[2]], PI / (3.415 - 2.0)).is_none());
+        // Three gauges: the residual vanishes at the true wavenumber only.
+        let k_fit = wavenumber_fit(&g, (1.5, 3.0)).unwrap();
+        assert!((k_fit / k - 1.0).abs() < 1e-6, "{k_fit}");
+        // Whereas the phase lag between two of them is biased by the reflection.
+        let k_lag = wavenumber_from_phases(g[0].phase, g[1].phase, g[1].x - g[0].x);
+        assert!((k_lag / k - 1.0).abs() > 0.01, "{k_lag}");
     }
 }
