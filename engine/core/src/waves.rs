@@ -414,4 +414,41 @@ mod tests {
         let k_lag = wavenumber_from_phases(g[0].phase, g[1].phase, g[1].x - g[0].x);
         assert!((k_lag / k - 1.0).abs() > 0.01, "{k_lag}");
     }
+
+    #[test]
+    fn a_flume_record_is_measured_against_its_theory() {
+        // A probes.csv holding exactly the theory's wave plus a 5 % reflection.
+        let (omega, k, h) = (2.0 * PI / 1.5, 2.2233, 0.0541);
+        let theory = WaveTheory {
+            depth: 0.5,
+            omega,
+            k,
+            height: h,
+            gauges: vec![
+                ("G1".into(), 2.0),
+                ("G2".into(), 2.7075),
+                ("G3".into(), 3.415),
+            ],
+            window: (6.0, 12.0),
+        };
+        let mut csv = String::from("time,G1,G2,G3\n");
+        for i in 0..=1200 {
+            let t = i as f64 * 0.01;
+            let eta = |x: f64| {
+                0.5 * h * (omega * t - k * x).sin() + 0.025 * h * (omega * t + k * x).sin()
+            };
+            csv += &format!("{t},{},{},{}\n", eta(2.0), eta(2.7075), eta(3.415));
+        }
+        let path = std::env::temp_dir().join(format!("sph_waves_{}.csv", std::process::id()));
+        std::fs::write(&path, csv).unwrap();
+        let report = theory.measure(&path).unwrap();
+        let _ = std::fs::remove_file(&path);
+        assert!(report.k_error().unwrap().abs() < 1e-6);
+        assert!((report.reflection().unwrap() - 0.05).abs() < 1e-6);
+        assert!((2.0 * report.split.unwrap().incident / h - 1.0).abs() < 1e-6);
+        assert!(report.markdown().contains("| G2 | 2.7075 |"));
+        assert!(theory
+            .measure(Path::new("/nonexistent/probes.csv"))
+            .is_err());
+    }
 }
