@@ -126,8 +126,9 @@ pub struct WaveSplit {
 
 /// Splits the first harmonics at the gauges into eta = a_I sin(wt - kx + .) +
 /// a_R sin(wt + kx + .) for wavenumber k, i.e. complex amplitudes
-/// A(x) = I e^{-ikx} + R e^{ikx}, by least squares. Gauge spacings with k dx a
-/// multiple of pi cannot separate the two (a quarter wavelength apart is best): None.
+/// A(x) = I e^{-ikx} + R e^{ikx}, by least squares. Gauge spacings with k dx within
+/// 0.1 pi of a multiple of pi cannot separate the two (a quarter wavelength apart is
+/// best): None.
 pub fn incident_reflected(gauges: &[GaugeHarmonic], k: f64) -> Option<WaveSplit> {
     // Normal equations [[n, s*], [s, n]] (I, R) = (b1, b2) with e = e^{-ikx}.
     let n = gauges.len() as f64;
@@ -146,8 +147,11 @@ pub fn incident_reflected(gauges: &[GaugeHarmonic], k: f64) -> Option<WaveSplit>
         b1 = b1 + e.conj() * a;
         b2 = b2 + e * a;
     }
+    // Real, n^2 - |s|^2; for two gauges 4 sin^2(k dx). Goda & Suzuki's usable range
+    // 0.1 pi < k dx < 0.9 pi is det >= n^2 sin^2(0.1 pi); below it noise is amplified
+    // more than tenfold.
     let det = Cplx(n * n, 0.0) - s * s.conj();
-    if gauges.len() < 2 || det.norm2().sqrt() < 1e-9 * n * n {
+    if gauges.len() < 2 || det.0 < n * n * (0.1 * PI).sin().powi(2) {
         return None;
     }
     let i = (Cplx(n, 0.0) * b1 - s.conj() * b2) / det;
