@@ -29,6 +29,7 @@
 use crate::neighbour_grid::Neighbours;
 use glam::DVec2;
 use serde::{Deserialize, Serialize};
+use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::{
     Acceleration, Density, Fluid, Mass, NeighbourCount, Position, Pressure, PressureSensor, Tank,
     Velocity, Wall, WaveGauge,
@@ -36,7 +37,7 @@ use sph_core::components::{
 use sph_core::kernel;
 use sph_core::motion::Pose;
 use sph_core::piston::PISTON_WALL;
-use sph_core::series::SeriesWriter;
+use sph_core::series::{check_samples, SeriesWriter, MAX_SAMPLES};
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::walls::WallSet;
@@ -192,9 +193,32 @@ impl Stage for Probe {
         if columns.is_empty() {
             return Err(err("nothing to probe: add pressure_sensors or wave_gauges to the scenario, or turn on front, column_height, density_fluctuation or neighbours".into()));
         }
+        check_samples(
+            sim.clock.end_time,
+            self.params.interval,
+            MAX_SAMPLES,
+            "rows",
+        )
+        .map_err(err)?;
         let path = sim.out_dir.join("probes.csv");
-        self.out = Some(SeriesWriter::create(&path, columns).map_err(|e| err(e.to_string()))?);
+        self.out = Some(SeriesWriter::open(sim, &path, columns).map_err(|e| err(e.to_string()))?);
         Ok(())
+    }
+
+    /// Flushes probes.csv; keeps the next sample time.
+    fn save_state(&mut self, _sim: &Sim) -> Result<Vec<u8>, StepError> {
+        if let Some(out) = &mut self.out {
+            out.flush()?;
+        }
+        let mut e = Enc::default();
+        e.f64(self.next);
+        Ok(e.into_bytes())
+    }
+
+    fn load_state(&mut self, _sim: &mut Sim, state: &[u8]) -> Result<(), String> {
+        let mut d = Dec::new(state);
+        self.next = d.f64()?;
+        d.end()
     }
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {

@@ -2,9 +2,12 @@
 //! per sample, flushed at least every two seconds of wall time so a killed run keeps
 //! what it reported. The rows are also kept in memory for the end-of-run plots.
 
+use crate::checkpoint::Resuming;
+use crate::output::atomic::write_atomic;
 use crate::output::plot::{plot_series, Series, Style};
+use crate::sim::Sim;
 use crate::stage::StepError;
-use std::fs::File;
+use std::fs::{File, OpenOptions};
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -36,6 +39,59 @@ impl SeriesWriter {
             .map_err(|e| StepError::output(path, e))?;
         w.flush()?;
         Ok(w)
+    }
+
+    /// [`SeriesWriter::create`], or on a run resuming from a checkpoint
+    /// ([`crate::checkpoint::Resuming`] among the resources) [`SeriesWriter::resume`].
+    pub fn open(sim: &Sim, path: &Path, columns: Vec<String>) -> Result<Self, StepError> {
+        match sim.resources.get::<Resuming>() {
+            Some(r) => Self::resume(path, columns, r.time),
+            None => Self::create(path, columns),
+        }
+    }
+
+    /// Continues a file an earlier run wrote: keeps the header and the rows up to
+    /// simulated time `time` (those a checkpoint taken then had flushed), drops the
+    /// rest (rows written after the checkpoint, or a half-written last line), and
+    /// appends from there. The header must match `columns`.
+    pub fn resume(path: &Path, columns: Vec<String>, time: f64) -> Result<Self, StepError> {
+        let err = |m: String| StepError::output(path, format!("cannot resume: {m}"));
+        let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
+        let header = format!("time,{}", columns.join(","));
+        let mut lines = text.split_inclusive('\n');
+        if lines.next().map(str::trim_end) != Some(header.as_str()) {
+            return Err(err(format!(
+                "its header is not `{header}` (the file was changed, or the scenario's columns differ)"
+            )));
+        }
+        let mut kept = format!("{header}\n");
+        let mut rows = Vec::new();
+        for line in lines {
+            let Some(line) = line.strip_suffix('\n') else {
+                break; // a half-written last line
+            };
+            let values: Result<Vec<f64>, _> = line.split(',').map(str::parse::<f64>).collect();
+            let Ok(mut values) = values else { break };
+            if values.len() != columns.len() + 1 || values[0] > time {
+                break;
+            }
+            let t = values.remove(0);
+            rows.push((t, values));
+            kept.push_str(line);
+            kept.push('\n');
+        }
+        write_atomic(path, kept.as_bytes()).map_err(|e| StepError::output(path, e))?;
+        let file = OpenOptions::new()
+            .append(true)
+            .open(path)
+            .map_err(|e| StepError::output(path, e))?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            columns,
+            file: BufWriter::new(file),
+            last_flush: Instant::now(),
+            rows,
+        })
     }
 
     pub fn columns(&self) -> &[String] {
@@ -94,4 +150,21 @@ impl SeriesWriter {
         plot_series(path, title, "time [s]", y_label, &series)
             .map_err(|e| StepError::output(path, e))
     }
+}
+
+/// The most rows a time series (or frames a frame sequence) may hold: each row is also
+/// kept in memory for the plots, so more would risk exhausting it.
+pub const MAX_SAMPLES: f64 = 5e6;
+
+/// Refuses, before the run, a sampling `interval` [s] that would give more than
+/// `max` samples over `end_time`; the message names the stage's `interval` field. An
+/// interval of 0 (every step) is not checked here.
+pub fn check_samples(end_time: f64, interval: f64, max: f64, what: &str) -> Result<(), String> {
+    if interval > 0.0 && end_time / interval > max {
+        return Err(format!(
+            "field `interval` = {interval} s gives {:.0} {what} over end_time = {end_time} s; accepted: at most {max:.0} (use a longer interval or a shorter run)",
+            (end_time / interval).ceil()
+        ));
+    }
+    Ok(())
 }
