@@ -10,7 +10,7 @@ use crate::forces::ViscousDissipation;
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::{Density, Mass, Position, Velocity};
-use sph_core::series::{check_samples, SeriesWriter, MAX_SAMPLES};
+use sph_core::series::SeriesWriter;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::world::{sum_fixed, Particles};
@@ -92,16 +92,9 @@ impl Stage for Energy {
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         sim.resources.insert(ViscousDissipation::default());
         let columns = COLUMNS.iter().map(|c| c.to_string()).collect();
-        let err = |m: String| SetupError::new("energy", m);
-        check_samples(
-            sim.clock.end_time,
-            self.params.interval,
-            MAX_SAMPLES,
-            "rows",
-        )
-        .map_err(err)?;
-        let out = SeriesWriter::open(sim, &sim.out_dir.join("energy.csv"), columns);
-        self.out = Some(out.map_err(|e| err(e.to_string()))?);
+        let path = sim.out_dir.join("energy.csv");
+        let out = SeriesWriter::open_sampled(sim, &path, columns, self.params.interval);
+        self.out = Some(out.map_err(|m| SetupError::new("energy", m))?);
         Ok(())
     }
 

@@ -37,7 +37,7 @@ use sph_core::components::{
 use sph_core::kernel;
 use sph_core::motion::Pose;
 use sph_core::piston::PISTON_WALL;
-use sph_core::series::{check_samples, SeriesWriter, MAX_SAMPLES};
+use sph_core::series::SeriesWriter;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::walls::WallSet;
@@ -193,15 +193,9 @@ impl Stage for Probe {
         if columns.is_empty() {
             return Err(err("nothing to probe: add pressure_sensors or wave_gauges to the scenario, or turn on front, column_height, density_fluctuation or neighbours".into()));
         }
-        check_samples(
-            sim.clock.end_time,
-            self.params.interval,
-            MAX_SAMPLES,
-            "rows",
-        )
-        .map_err(err)?;
         let path = sim.out_dir.join("probes.csv");
-        self.out = Some(SeriesWriter::open(sim, &path, columns).map_err(|e| err(e.to_string()))?);
+        let out = SeriesWriter::open_sampled(sim, &path, columns, self.params.interval);
+        self.out = Some(out.map_err(err)?);
         Ok(())
     }
 

@@ -50,6 +50,19 @@ impl SeriesWriter {
         }
     }
 
+    /// [`SeriesWriter::open`] for a stage sampling every `interval` seconds, first
+    /// refusing an interval that would give more than [`MAX_SAMPLES`] rows over the
+    /// run ([`check_samples`]). The error is the message for the stage's setup.
+    pub fn open_sampled(
+        sim: &Sim,
+        path: &Path,
+        columns: Vec<String>,
+        interval: f64,
+    ) -> Result<Self, String> {
+        check_samples(sim.clock.end_time, interval, MAX_SAMPLES, "rows")?;
+        Self::open(sim, path, columns).map_err(|e| e.to_string())
+    }
+
     /// Continues a file an earlier run wrote: keeps the header and the rows up to
     /// simulated time `time` (those a checkpoint taken then had flushed), drops the
     /// rest (rows written after the checkpoint, or a half-written last line), and
