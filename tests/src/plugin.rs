@@ -141,9 +141,11 @@ impl Stage for MaxSpeed {
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         let columns = vec!["max_speed".to_string()];
-        // `open`, not `create`: a run resuming from a checkpoint continues the file.
-        let out = SeriesWriter::open(sim, &sim.out_dir.join(CSV), columns)
-            .map_err(|e| SetupError::new(NAME, e.to_string()))?;
+        // `open_sampled`, not `create`: a resumed run continues the file.
+        // It also refuses an interval giving an absurd number of rows.
+        let out =
+            SeriesWriter::open_sampled(sim, &sim.out_dir.join(CSV), columns, self.params.interval)
+                .map_err(|e| SetupError::new(NAME, e))?;
         self.out = Some(out);
         Ok(())
     }

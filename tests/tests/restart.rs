@@ -13,9 +13,11 @@ use std::path::{Path, PathBuf};
 const WAVE: &str = include_str!("../../scenarios/wave_maker.ron");
 const SLOSHING: &str = include_str!("../../scenarios/sloshing.ron");
 
-/// A coarse wave maker: 630 particles, the piston moving from the start.
-const WAVE_COARSE: [&str; 6] = [
+/// A coarse wave maker: 630 particles, the piston moving from the start, particles
+/// sorted every 7 steps (so a checkpoint falls between two sorts).
+const WAVE_COARSE: [&str; 7] = [
     "resolution=Spacing(0.08)",
+    "pipeline.neighbour_grid.sort_every=7",
     "end_time=0.6",
     "piston.ramp=0.0",
     "pipeline.vtk_frames.interval=0.25",

@@ -174,6 +174,12 @@ pub fn resume(args: &ResumeArgs, registry: &StageRegistry) -> Result<ExitCode, S
         eprintln!("note: {note}");
     }
     let origin = checkpoint.origin.clone();
+    if origin.scenario.as_os_str().is_empty() {
+        return Err(format!(
+            "{}: the checkpoint does not record its scenario file (it was written by a program other than `engine`)",
+            checkpoint.file.display()
+        ));
+    }
     let overrides = parse_overrides(&origin.sets)?;
     let scenario = Scenario::load(&origin.scenario, &overrides, registry)
         .map_err(|e| format!("{e}\n(the scenario the checkpoint was written for)"))?;

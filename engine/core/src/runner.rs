@@ -256,7 +256,13 @@ fn run_in_pool(mut scenario: Scenario, opts: &RunOptions) -> Result<(Summary, Si
         }
         ghost_sum += count::<Ghost>(&sim.world) as f64;
         if step.is_multiple_of(20) {
-            update_progress(&progress, &sim, summary.fluid_particles, start.elapsed());
+            let steps = sim.clock.step - start_step;
+            update_progress(
+                &progress,
+                &sim,
+                summary.fluid_particles * steps as usize,
+                start.elapsed(),
+            );
         }
         let done = sim.clock.time >= sim.clock.end_time * (1.0 - 1e-12);
         if done || !sim.clock.step.is_multiple_of(period) {
@@ -482,9 +488,10 @@ fn progress_bar(show: bool, end_time: f64) -> ProgressBar {
     bar
 }
 
-fn update_progress(bar: &ProgressBar, sim: &Sim, particles: usize, elapsed: Duration) {
+/// `particle_steps`: particle-steps done by this session (not before a resume).
+fn update_progress(bar: &ProgressBar, sim: &Sim, particle_steps: usize, elapsed: Duration) {
     bar.set_position((sim.clock.time * 1e4) as u64);
-    let rate = particles as f64 * sim.clock.step as f64 / elapsed.as_secs_f64().max(1e-9);
+    let rate = particle_steps as f64 / elapsed.as_secs_f64().max(1e-9);
     bar.set_message(format!(
         "{:.3} / {:.3} s, step {}, dt {:.2e} s, {:.2e} particle-steps/s",
         sim.clock.time, sim.clock.end_time, sim.clock.step, sim.clock.dt, rate

@@ -181,3 +181,31 @@ pub fn check_samples(end_time: f64, interval: f64, max: f64, what: &str) -> Resu
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn resume_keeps_rows_up_to_the_checkpoint_and_drops_a_half_line() {
+        let dir = std::env::temp_dir().join(format!("sph_core_series_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("s.csv");
+        let columns = vec!["a".to_string(), "b".to_string()];
+        std::fs::write(&path, "time,a,b\n0,1,2\n0.1,3,NaN\n0.2,5,6\n0.3,7").unwrap();
+        let mut w = SeriesWriter::resume(&path, columns.clone(), 0.1).unwrap();
+        assert_eq!(w.column("a"), [(0.0, 1.0), (0.1, 3.0)]);
+        w.push(0.15, vec![9.0, 10.0]).unwrap();
+        w.flush().unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert_eq!(text, "time,a,b\n0,1,2\n0.1,3,NaN\n0.15,9,10\n");
+        // Past a half-written line nothing is kept; a wrong header is refused.
+        std::fs::write(&path, "time,a,b\n0,1,2\n0.1,3").unwrap();
+        let w = SeriesWriter::resume(&path, columns.clone(), 1.0).unwrap();
+        assert_eq!(w.column("b"), [(0.0, 2.0)]);
+        std::fs::write(&path, "time,a\n0,1\n").unwrap();
+        let err = SeriesWriter::resume(&path, columns, 1.0).err().unwrap();
+        assert!(err.to_string().contains("header"), "{err}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
