@@ -230,3 +230,40 @@ fn absurd_sizes_are_refused_before_allocation() {
         "{err}"
     );
 }
+
+/// A full disk, simulated with /dev/full (every write fails with ENOSPC): the error
+/// names the file, the run does not panic, and earlier checkpoints are untouched.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_full_disk_is_reported_with_the_file_name() {
+    use std::os::unix::fs::symlink;
+    if !Path::new("/dev/full").exists() {
+        return;
+    }
+    // A CSV series on a full disk: refused at setup.
+    let out = temp_out("restart-full-csv");
+    std::fs::create_dir_all(&out).unwrap();
+    symlink("/dev/full", out.join("energy.csv")).unwrap();
+    let err = run(wave(), &options(&out, 1)).unwrap_err().to_string();
+    assert!(
+        err.contains("energy.csv") && err.contains("No space left"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&out);
+
+    // A checkpoint on a full disk: the run stops with the file named.
+    let out = temp_out("restart-full-checkpoint");
+    std::fs::create_dir_all(&out).unwrap();
+    symlink("/dev/full", out.join(TEMPORARY)).unwrap();
+    let opts = RunOptions {
+        stop_at: Some(0.05),
+        ..options(&out, 1)
+    };
+    let err = run(wave(), &opts).unwrap_err().to_string();
+    assert!(
+        err.contains(TEMPORARY) && err.contains("No space left"),
+        "{err}"
+    );
+    assert!(!out.join(LATEST).exists());
+    let _ = std::fs::remove_dir_all(&out);
+}
