@@ -96,8 +96,17 @@ pub fn fingerprint(resolved_ron: &str) -> u64 {
     fnv1a(resolved_ron.as_bytes())
 }
 
-/// Encodes a checkpoint file.
+/// Encodes a checkpoint file ([`begin`], the payload, [`seal`]).
 pub fn encode(step: u64, time: f64, fingerprint: u64, origin: &Origin, payload: &[u8]) -> Vec<u8> {
+    let mut e = begin(step, time, fingerprint, origin);
+    e.raw(payload);
+    seal(e)
+}
+
+/// Starts a checkpoint file with its header; the caller appends the payload (the rest
+/// of the file up to the checksum, so it is built in place, not copied) and calls
+/// [`seal`].
+pub fn begin(step: u64, time: f64, fingerprint: u64, origin: &Origin) -> Enc {
     let mut e = Enc::default();
     e.raw(MAGIC);
     e.u32(VERSION);
@@ -109,14 +118,19 @@ pub fn encode(step: u64, time: f64, fingerprint: u64, origin: &Origin, payload: 
     for s in &origin.sets {
         e.str(s);
     }
-    e.bytes(payload);
+    e
+}
+
+/// Ends a checkpoint file started by [`begin`] with its checksum.
+pub fn seal(mut e: Enc) -> Vec<u8> {
     let sum = fnv1a(&e.0);
     e.u64(sum);
     e.0
 }
 
-/// Decodes a checkpoint file, checking its magic, version and checksum.
-pub fn decode(bytes: &[u8], file: &Path) -> Result<Checkpoint, String> {
+/// Decodes a checkpoint file, checking its magic, version and checksum. The payload
+/// keeps the file's buffer (no copy).
+pub fn decode(mut bytes: Vec<u8>, file: &Path) -> Result<Checkpoint, String> {
     if bytes.len() < MAGIC.len() + 8 || &bytes[..MAGIC.len()] != MAGIC {
         return Err("not a checkpoint file (bad magic number or truncated)".into());
     }
@@ -136,8 +150,11 @@ pub fn decode(bytes: &[u8], file: &Path) -> Result<Checkpoint, String> {
     let scenario = PathBuf::from(d.str()?);
     let n = d.len(1)?;
     let sets = (0..n).map(|_| d.str()).collect::<Result<_, _>>()?;
-    let payload = d.bytes()?.to_vec();
-    d.end()?;
+    let header = MAGIC.len() + d.pos;
+    let body = bytes.len() - 8;
+    bytes.truncate(body);
+    bytes.drain(..header);
+    let payload = bytes;
     Ok(Checkpoint {
         step,
         time,
@@ -190,7 +207,7 @@ pub fn read_latest(dir: &Path) -> Result<(Checkpoint, Vec<String>), String> {
     let read = |name: &str| -> Result<Checkpoint, String> {
         let path = dir.join(name);
         let bytes = fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-        decode(&bytes, &path).map_err(|e| format!("{}: {e}", path.display()))
+        decode(bytes, &path).map_err(|e| format!("{}: {e}", path.display()))
     };
     let latest = dir.join(LATEST);
     let first = if latest.exists() {
@@ -236,7 +253,8 @@ pub fn read_latest(dir: &Path) -> Result<(Checkpoint, Vec<String>), String> {
 pub struct Enc(pub Vec<u8>);
 
 impl Enc {
-    fn raw(&mut self, b: &[u8]) {
+    /// Bytes as they are (no length).
+    pub fn raw(&mut self, b: &[u8]) {
         self.0.extend_from_slice(b);
     }
     pub fn u32(&mut self, v: u32) {
@@ -570,16 +588,19 @@ mod tests {
             sets: vec!["end_time=1".into()],
         };
         let bytes = encode(7, 0.125, 42, &origin, b"payload");
-        let c = decode(&bytes, Path::new("c")).unwrap();
+        let c = decode(bytes.clone(), Path::new("c")).unwrap();
         assert_eq!((c.step, c.time, c.fingerprint), (7, 0.125, 42));
         assert_eq!(c.origin, origin);
         assert_eq!(c.payload, b"payload");
         for cut in [0, 5, 20, bytes.len() - 1] {
-            assert!(decode(&bytes[..cut], Path::new("c")).is_err(), "cut {cut}");
+            assert!(
+                decode(bytes[..cut].to_vec(), Path::new("c")).is_err(),
+                "cut {cut}"
+            );
         }
         let mut flipped = bytes.clone();
         flipped[30] ^= 1;
-        assert!(decode(&flipped, Path::new("c")).is_err());
+        assert!(decode(flipped, Path::new("c")).is_err());
     }
 
     #[test]

@@ -2,7 +2,7 @@
 //! spans, times every stage, shows progress, and writes `summary.json` and the
 //! resolved scenario — also when the run stops early.
 
-use crate::checkpoint::{Checkpoint, Dec, Enc, Origin, Resuming};
+use crate::checkpoint::{Checkpoint, Dec, Origin, Resuming};
 use crate::components::{Fluid, Ghost};
 use crate::frame::write_fluid_frame;
 use crate::scenario::PipelineEntry;
@@ -401,8 +401,8 @@ fn checkpoint(
     fingerprint: u64,
     opts: &RunOptions,
 ) -> Result<(), StepError> {
-    let mut e = Enc::default();
     let c = &sim.clock;
+    let mut e = crate::checkpoint::begin(c.step, c.time, fingerprint, &opts.origin);
     e.f64(c.time);
     e.f64(c.dt);
     e.u64(c.step);
@@ -420,8 +420,7 @@ fn checkpoint(
         e.f64(time.seconds);
         e.bytes(&entry.stage.save_state(sim)?);
     }
-    let bytes =
-        crate::checkpoint::encode(c.step, c.time, fingerprint, &opts.origin, &e.into_bytes());
+    let bytes = crate::checkpoint::seal(e);
     crate::checkpoint::write(&opts.out_dir, &bytes).map_err(|message| StepError::Output {
         path: "checkpoint".into(),
         message,
