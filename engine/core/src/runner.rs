@@ -114,6 +114,9 @@ pub enum RunError {
     },
     #[error("output {path}: {message}")]
     Output { path: String, message: String },
+    /// A run option out of range (`--checkpoint-every`, `--stop-at`).
+    #[error("{0}")]
+    Options(String),
 }
 
 /// Runs a scenario to its end time. On an unstable step the run stops, writes the
@@ -345,9 +348,8 @@ fn run_in_pool(mut scenario: Scenario, opts: &RunOptions) -> Result<(Summary, Si
 
 /// Refuses checkpoint options that make no sense, before anything is written.
 fn check_options(opts: &RunOptions) -> Result<(), RunError> {
-    let bad = |name: &str, v: f64| RunError::Output {
-        path: name.into(),
-        message: format!("{v} is out of range; accepted: seconds > 0"),
+    let bad = |name: &str, v: f64| {
+        RunError::Options(format!("{name} {v} is out of range; accepted: seconds > 0"))
     };
     if let Some(t) = opts
         .checkpoint_every
