@@ -70,7 +70,7 @@ fn stopped(scenario: Scenario, tag: &str, every: Option<f64>, stop: f64) -> Path
     };
     let summary = run(scenario, &opts).unwrap_or_else(|e| panic!("{e}"));
     assert!(
-        summary.status.starts_with("stopped at step"),
+        summary.status.starts_with("paused (--stop-at) at step"),
         "{}",
         summary.status
     );

@@ -293,7 +293,7 @@ fn run_in_pool(mut scenario: Scenario, opts: &RunOptions) -> Result<(Summary, Si
             paused = Some(if interrupted {
                 "interrupted"
             } else {
-                "stopped"
+                "paused (--stop-at)"
             });
             break;
         }
