@@ -132,7 +132,8 @@ pub fn main_with(registry: StageRegistry) -> ExitCode {
 /// Exit code of a run stopped by Ctrl-C (128 + SIGINT), after its checkpoint.
 pub const INTERRUPTED: u8 = 130;
 
-/// The flag a first Ctrl-C (SIGINT, or SIGTERM) sets: the run writes a checkpoint at
+/// The flag a first Ctrl-C (SIGINT; also SIGTERM and SIGHUP, as a batch system or a
+/// closed terminal sends) sets: the run writes a checkpoint at
 /// the next step where it can and exits. A second Ctrl-C exits at once. Installed once.
 fn interrupt_flag() -> Option<Arc<AtomicBool>> {
     static FLAG: OnceLock<Option<Arc<AtomicBool>>> = OnceLock::new();

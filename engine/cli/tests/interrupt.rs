@@ -5,7 +5,7 @@
 #![cfg(unix)]
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Command, ExitStatus};
 use std::time::{Duration, Instant};
 
 const ENGINE: &str = env!("CARGO_BIN_EXE_engine");
@@ -38,16 +38,11 @@ fn engine(args: &[&str]) -> Command {
     c
 }
 
-#[test]
-fn sigint_writes_a_checkpoint_and_resume_continues() {
-    let (out, reference) = (temp("run"), temp("reference"));
-    let out_s = out.to_str().unwrap();
-    let scene = scenario();
-    let scene = scene.to_str().unwrap();
-    let mut args = vec![scene, "--out", out_s, "--set", "end_time=500.0"];
-    args.extend(SETS);
-    let mut child = engine(&args).spawn().unwrap();
-    // The handler is installed before the stages' setup, which creates probes.csv.
+/// Starts `engine ARGS`, waits until its run has started (the signal handler is
+/// installed before the stages' setup, which creates probes.csv in `out`) and a little
+/// more, sends `signal` with `kill`, and returns the exit status.
+fn signal_once_started(args: &[&str], out: &Path, signal: &str) -> ExitStatus {
+    let mut child = engine(args).spawn().unwrap();
     let start = Instant::now();
     while !out.join("probes.csv").exists() {
         assert!(
@@ -58,11 +53,22 @@ fn sigint_writes_a_checkpoint_and_resume_continues() {
     }
     std::thread::sleep(Duration::from_millis(200));
     let killed = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
+        .args([signal, &child.id().to_string()])
         .status()
         .unwrap();
     assert!(killed.success());
-    let status = child.wait().unwrap();
+    child.wait().unwrap()
+}
+
+#[test]
+fn sigint_writes_a_checkpoint_and_resume_continues() {
+    let (out, reference) = (temp("run"), temp("reference"));
+    let out_s = out.to_str().unwrap();
+    let scene = scenario();
+    let scene = scene.to_str().unwrap();
+    let mut args = vec![scene, "--out", out_s, "--set", "end_time=500.0"];
+    args.extend(SETS);
+    let status = signal_once_started(&args, &out, "-INT");
     assert_eq!(status.code(), Some(130), "exit code after Ctrl-C");
     let summary = std::fs::read_to_string(out.join("summary.json")).unwrap();
     assert!(summary.contains("interrupted at step"), "{summary}");
@@ -97,4 +103,23 @@ fn sigint_writes_a_checkpoint_and_resume_continues() {
     for dir in [out, reference] {
         let _ = std::fs::remove_dir_all(dir);
     }
+}
+
+#[test]
+fn sigterm_also_checkpoints() {
+    let out = temp("term");
+    let out_s = out.to_str().unwrap();
+    let scene = scenario();
+    let mut args = vec![
+        scene.to_str().unwrap(),
+        "--out",
+        out_s,
+        "--set",
+        "end_time=500.0",
+    ];
+    args.extend(SETS);
+    let status = signal_once_started(&args, &out, "-TERM");
+    assert_eq!(status.code(), Some(130), "exit code after SIGTERM");
+    assert!(sph_core::checkpoint::read_latest(&out).is_ok());
+    let _ = std::fs::remove_dir_all(out);
 }
