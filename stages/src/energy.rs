@@ -8,6 +8,7 @@
 
 use crate::forces::ViscousDissipation;
 use serde::{Deserialize, Serialize};
+use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::{Density, Mass, Position, Velocity};
 use sph_core::series::SeriesWriter;
 use sph_core::sim::Sim;
@@ -91,9 +92,28 @@ impl Stage for Energy {
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         sim.resources.insert(ViscousDissipation::default());
         let columns = COLUMNS.iter().map(|c| c.to_string()).collect();
-        let out = SeriesWriter::create(&sim.out_dir.join("energy.csv"), columns);
-        self.out = Some(out.map_err(|e| SetupError::new("energy", e.to_string()))?);
+        let path = sim.out_dir.join("energy.csv");
+        let out = SeriesWriter::open_sampled(sim, &path, columns, self.params.interval);
+        self.out = Some(out.map_err(|m| SetupError::new("energy", m))?);
         Ok(())
+    }
+
+    /// Flushes energy.csv; keeps the dissipated work and the next sample time.
+    fn save_state(&mut self, _sim: &Sim) -> Result<Vec<u8>, StepError> {
+        if let Some(out) = &mut self.out {
+            out.flush()?;
+        }
+        let mut e = Enc::default();
+        e.f64(self.viscous);
+        e.f64(self.next);
+        Ok(e.into_bytes())
+    }
+
+    fn load_state(&mut self, _sim: &mut Sim, state: &[u8]) -> Result<(), String> {
+        let mut d = Dec::new(state);
+        self.viscous = d.f64()?;
+        self.next = d.f64()?;
+        d.end()
     }
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {

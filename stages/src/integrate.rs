@@ -11,6 +11,7 @@
 use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use sph_core::checkpoint::{get_column, put_column, Dec, Enc};
 use sph_core::components::{Acceleration, Density, DensityRate, Fluid, Position, Velocity};
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
@@ -103,6 +104,8 @@ pub struct HalfVelocity(pub DVec2);
 #[derive(Clone, Copy, Debug, Default)]
 pub struct HalfDensity(pub f64);
 
+sph_core::checkpoint_newtype!(HalfVelocity(DVec2), HalfDensity(f64));
+
 pub struct Integrate {
     params: Params,
     first_dt: Option<f64>,
@@ -123,6 +126,26 @@ impl Stage for Integrate {
         ensure_component::<Fluid, HalfDensity>(&mut sim.world);
         self.walls = WallSet::from_world(&sim.world);
         Ok(())
+    }
+
+    /// The first step (the collapse reference) and the half-step columns; the walls
+    /// follow from the time.
+    fn save_state(&mut self, sim: &Sim) -> Result<Vec<u8>, StepError> {
+        let mut e = Enc::default();
+        e.opt_f64(self.first_dt);
+        let fluid = archetype::<Fluid>(&sim.world);
+        put_column::<HalfVelocity>(&mut e, fluid);
+        put_column::<HalfDensity>(&mut e, fluid);
+        Ok(e.into_bytes())
+    }
+
+    fn load_state(&mut self, sim: &mut Sim, state: &[u8]) -> Result<(), String> {
+        let mut d = Dec::new(state);
+        self.first_dt = d.opt_f64()?;
+        let fluid = archetype::<Fluid>(&sim.world);
+        get_column::<HalfVelocity>(&mut d, fluid)?;
+        get_column::<HalfDensity>(&mut d, fluid)?;
+        d.end()
     }
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {

@@ -29,6 +29,7 @@
 use crate::neighbour_grid::Neighbours;
 use glam::DVec2;
 use serde::{Deserialize, Serialize};
+use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::{
     Acceleration, Density, Fluid, Mass, NeighbourCount, Position, Pressure, PressureSensor, Tank,
     Velocity, Wall, WaveGauge,
@@ -193,8 +194,25 @@ impl Stage for Probe {
             return Err(err("nothing to probe: add pressure_sensors or wave_gauges to the scenario, or turn on front, column_height, density_fluctuation or neighbours".into()));
         }
         let path = sim.out_dir.join("probes.csv");
-        self.out = Some(SeriesWriter::create(&path, columns).map_err(|e| err(e.to_string()))?);
+        let out = SeriesWriter::open_sampled(sim, &path, columns, self.params.interval);
+        self.out = Some(out.map_err(err)?);
         Ok(())
+    }
+
+    /// Flushes probes.csv; keeps the next sample time.
+    fn save_state(&mut self, _sim: &Sim) -> Result<Vec<u8>, StepError> {
+        if let Some(out) = &mut self.out {
+            out.flush()?;
+        }
+        let mut e = Enc::default();
+        e.f64(self.next);
+        Ok(e.into_bytes())
+    }
+
+    fn load_state(&mut self, _sim: &mut Sim, state: &[u8]) -> Result<(), String> {
+        let mut d = Dec::new(state);
+        self.next = d.f64()?;
+        d.end()
     }
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {

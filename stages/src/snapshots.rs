@@ -3,6 +3,7 @@
 
 use glam::DVec2;
 use serde::{Deserialize, Serialize};
+use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::{Position, Pressure};
 use sph_core::output::png::{write_snapshot, Snapshot};
 use sph_core::sim::Sim;
@@ -75,6 +76,19 @@ pub struct Snapshots {
 impl Stage for Snapshots {
     fn name(&self) -> &'static str {
         "snapshots"
+    }
+
+    /// How many of the listed times are taken.
+    fn save_state(&mut self, _sim: &Sim) -> Result<Vec<u8>, StepError> {
+        let mut e = Enc::default();
+        e.u64(self.taken as u64);
+        Ok(e.into_bytes())
+    }
+
+    fn load_state(&mut self, _sim: &mut Sim, state: &[u8]) -> Result<(), String> {
+        let mut d = Dec::new(state);
+        self.taken = d.u64()? as usize;
+        d.end()
     }
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {

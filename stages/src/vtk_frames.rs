@@ -4,12 +4,17 @@
 //! (open both; ParaView plays them together).
 
 use serde::{Deserialize, Serialize};
+use sph_core::checkpoint::{Dec, Enc};
 use sph_core::frame::write_fluid_frame;
 use sph_core::output::vtk::{write_segments_vtp, PvdIndex};
+use sph_core::series::check_samples;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::walls::WallSet;
 use sph_core::StageRegistry;
+
+/// The most frames a run may write.
+const MAX_FRAMES: f64 = 1e5;
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -68,12 +73,55 @@ impl Stage for VtkFrames {
                 format!("cannot create {}: {e}", dir.display()),
             )
         })?;
+        check_samples(
+            sim.clock.end_time,
+            self.params.interval,
+            MAX_FRAMES,
+            "frames",
+        )
+        .map_err(|m| SetupError::new("vtk_frames", m))?;
         self.index = Some(PvdIndex::new(sim.out_dir.join("frames.pvd")));
         let walls = WallSet::from_world(&sim.world);
         if walls.moving() {
             self.walls = Some((walls, PvdIndex::new(sim.out_dir.join("walls.pvd"))));
         }
         Ok(())
+    }
+
+    /// The next frame time, the frame count and the .pvd indexes.
+    fn save_state(&mut self, _sim: &Sim) -> Result<Vec<u8>, StepError> {
+        let mut e = Enc::default();
+        e.f64(self.next);
+        e.u64(self.written as u64);
+        let indexes = self.index.iter().chain(self.walls.iter().map(|(_, i)| i));
+        for index in indexes {
+            e.u64(index.entries().len() as u64);
+            for (t, name) in index.entries() {
+                e.f64(*t);
+                e.str(name);
+            }
+        }
+        Ok(e.into_bytes())
+    }
+
+    fn load_state(&mut self, _sim: &mut Sim, state: &[u8]) -> Result<(), String> {
+        let mut d = Dec::new(state);
+        self.next = d.f64()?;
+        self.written = d.u64()? as usize;
+        let indexes = self
+            .index
+            .iter_mut()
+            .chain(self.walls.iter_mut().map(|(_, i)| i));
+        for index in indexes {
+            let n = d.len(16)?;
+            let entries = (0..n)
+                .map(|_| Ok((d.f64()?, d.str()?)))
+                .collect::<Result<Vec<_>, String>>()?;
+            index
+                .restore(entries)
+                .map_err(|e| format!("{}: {e}", index.path().display()))?;
+        }
+        d.end()
     }
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {

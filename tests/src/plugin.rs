@@ -36,7 +36,13 @@
 //!    - [`Stage::run`] (every step): read and write the [`Sim`] — particle columns
 //!      through [`Particles`], the clock, constants, resources and diagnostics;
 //!    - [`Stage::finish`] (after the last step, also after an unstable stop): flush
-//!      files, draw plots.
+//!      files, draw plots;
+//!    - [`Stage::save_state`] and [`Stage::load_state`] (checkpoints, `engine
+//!      resume`): a stage that keeps anything between steps (counters, the next
+//!      sample time, per-particle columns it owns) encodes it with
+//!      [`sph_core::checkpoint::Enc`] and flushes its files; a stateless stage keeps
+//!      the defaults. Open CSV series with [`SeriesWriter::open`] so a resumed run
+//!      continues them. Without these a resumed run still runs, but not bit for bit.
 //! 4. **Registration.** Give the crate a `pub fn register(registry: &mut StageRegistry)`
 //!    (as [`register`] below). A program that wants the stage builds its registry with
 //!    `sph_stages::standard_registry()` and then calls it; a command-line binary is
@@ -56,6 +62,7 @@
 //! `tests/tests/plugin.rs` runs this stage on `tests/scenarios/plugin.ron`.
 
 use serde::{Deserialize, Serialize};
+use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::Velocity;
 use sph_core::series::SeriesWriter;
 use sph_core::sim::Sim;
@@ -134,8 +141,11 @@ impl Stage for MaxSpeed {
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         let columns = vec!["max_speed".to_string()];
-        let out = SeriesWriter::create(&sim.out_dir.join(CSV), columns)
-            .map_err(|e| SetupError::new(NAME, e.to_string()))?;
+        // `open_sampled`, not `create`: a resumed run continues the file.
+        // It also refuses an interval giving an absurd number of rows.
+        let out =
+            SeriesWriter::open_sampled(sim, &sim.out_dir.join(CSV), columns, self.params.interval)
+                .map_err(|e| SetupError::new(NAME, e))?;
         self.out = Some(out);
         Ok(())
     }
@@ -161,6 +171,25 @@ impl Stage for MaxSpeed {
             out.push(sim.clock.time, vec![speed])?;
         }
         Ok(())
+    }
+
+    /// Checkpoint: flush the CSV (its rows up to now must be on disk) and keep what the
+    /// next steps depend on. Restored by `load_state` on `engine resume`.
+    fn save_state(&mut self, _sim: &Sim) -> Result<Vec<u8>, StepError> {
+        if let Some(out) = &mut self.out {
+            out.flush()?;
+        }
+        let mut e = Enc::default();
+        e.f64(self.next);
+        e.f64(self.peak);
+        Ok(e.into_bytes())
+    }
+
+    fn load_state(&mut self, _sim: &mut Sim, state: &[u8]) -> Result<(), String> {
+        let mut d = Dec::new(state);
+        self.next = d.f64()?;
+        self.peak = d.f64()?;
+        d.end()
     }
 
     fn finish(&mut self, _sim: &mut Sim) -> Result<(), StepError> {

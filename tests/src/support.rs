@@ -36,6 +36,7 @@ pub fn run_completed(scenario: Scenario, tag: &str, threads: usize) -> (Summary,
         threads: Some(threads),
         progress: false,
         trace: None,
+        ..Default::default()
     };
     let (summary, sim) =
         run_keeping_state(scenario, &opts).unwrap_or_else(|e| panic!("{tag}: {e}"));

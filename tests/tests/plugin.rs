@@ -25,6 +25,7 @@ fn plugin_stage_runs_and_writes_its_series() {
         threads: Some(2),
         progress: false,
         trace: None,
+        ..Default::default()
     };
     let summary = run(scenario, &opts).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(summary.status, "completed");

@@ -35,6 +35,7 @@ fn run_on(text: &str, file: &str, coarse: &[&str], threads: usize) -> PathBuf {
         threads: Some(threads),
         progress: false,
         trace: None,
+        ..Default::default()
     };
     let summary = run(scenario, &opts).unwrap_or_else(|e| panic!("{threads} threads: {e}"));
     assert_eq!(summary.status, "completed");

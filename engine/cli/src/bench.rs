@@ -291,6 +291,7 @@ pub fn run_case(
         threads: Some(case.threads),
         progress: false,
         trace: None,
+        ..Default::default()
     };
     let (summary, sim) = run_keeping_state(scenario, &opts).map_err(|e| e.to_string())?;
     let end_bytes = proc_status("VmRSS:");

@@ -4,11 +4,14 @@
 pub mod bench;
 
 use clap::{Parser, Subcommand};
+use sph_core::checkpoint::Origin;
 use sph_core::overrides::Override;
 use sph_core::runner::{run, RunError, RunOptions};
 use sph_core::{Scenario, StageRegistry};
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, OnceLock};
 
 #[derive(Parser, Debug)]
 #[command(
@@ -30,6 +33,39 @@ pub enum Command {
     Stages,
     /// Benchmark the dam break over sizes and thread counts (bench.csv, bench.md).
     Bench(bench::BenchArgs),
+    /// Continue a run from the newest checkpoint in its output folder.
+    Resume(ResumeArgs),
+}
+
+/// Continuing a run from its checkpoint.
+#[derive(clap::Args, Debug, Clone)]
+pub struct ResumeArgs {
+    /// The run's output folder (holding checkpoint.bin).
+    pub dir: PathBuf,
+    /// Worker threads [default: one per core]; results do not depend on it.
+    #[arg(long)]
+    pub threads: Option<usize>,
+    #[command(flatten)]
+    pub checkpoints: CheckpointArgs,
+    /// Print the per-stage time table at the end.
+    #[arg(long)]
+    pub profile: bool,
+    /// No progress bar.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+/// When to write checkpoints.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct CheckpointArgs {
+    /// Write a checkpoint about every SECONDS of simulated time (checkpoint.bin in the
+    /// output folder, the previous one kept as checkpoint.prev.bin).
+    #[arg(long, value_name = "SECONDS")]
+    pub checkpoint_every: Option<f64>,
+    /// Stop once the simulated time reaches SECONDS, with a checkpoint
+    /// (continue with `engine resume DIR`).
+    #[arg(long, value_name = "SECONDS")]
+    pub stop_at: Option<f64>,
 }
 
 /// Running one scenario.
@@ -55,6 +91,8 @@ pub struct RunArgs {
     /// No progress bar.
     #[arg(long, short)]
     pub quiet: bool,
+    #[command(flatten)]
+    pub checkpoints: CheckpointArgs,
 }
 
 /// Parses the command line and runs; the exit code is non-zero on any error.
@@ -74,8 +112,15 @@ pub fn main_with(registry: StageRegistry) -> ExitCode {
                 ExitCode::FAILURE
             }
         },
+        Some(Command::Resume(args)) => match resume(&args, &registry) {
+            Ok(code) => code,
+            Err(message) => {
+                eprintln!("error: {message}");
+                ExitCode::FAILURE
+            }
+        },
         None => match run_scenario(&cli.run, &registry) {
-            Ok(()) => ExitCode::SUCCESS,
+            Ok(code) => code,
             Err(message) => {
                 eprintln!("error: {message}");
                 ExitCode::FAILURE
@@ -84,17 +129,89 @@ pub fn main_with(registry: StageRegistry) -> ExitCode {
     }
 }
 
+/// Exit code of a run stopped by Ctrl-C (128 + SIGINT), after its checkpoint.
+pub const INTERRUPTED: u8 = 130;
+
+/// The flag a first Ctrl-C (SIGINT; also SIGTERM and SIGHUP, as a batch system or a
+/// closed terminal sends) sets: the run writes a checkpoint at
+/// the next step where it can and exits. A second Ctrl-C exits at once. Installed once.
+fn interrupt_flag() -> Option<Arc<AtomicBool>> {
+    static FLAG: OnceLock<Option<Arc<AtomicBool>>> = OnceLock::new();
+    FLAG.get_or_init(|| {
+        let flag = Arc::new(AtomicBool::new(false));
+        let seen = flag.clone();
+        let installed = ctrlc::set_handler(move || {
+            if seen.swap(true, Ordering::SeqCst) {
+                eprintln!("\ninterrupted again: exiting without a checkpoint");
+                std::process::exit(INTERRUPTED as i32);
+            }
+            eprintln!("\ninterrupted: writing a checkpoint, then stopping (Ctrl-C again to exit at once)");
+        });
+        match installed {
+            Ok(()) => Some(flag),
+            Err(e) => {
+                eprintln!("warning: no Ctrl-C handler ({e}); Ctrl-C will stop the run without a checkpoint");
+                None
+            }
+        }
+    })
+    .clone()
+}
+
+/// Parses `--set` strings.
+fn parse_overrides(sets: &[String]) -> Result<Vec<Override>, String> {
+    sets.iter()
+        .map(|s| s.parse::<Override>().map_err(|e| e.to_string()))
+        .collect()
+}
+
+/// Continues a run from the newest usable checkpoint in `args.dir`.
+pub fn resume(args: &ResumeArgs, registry: &StageRegistry) -> Result<ExitCode, String> {
+    if args.threads == Some(0) {
+        return Err("--threads must be at least 1".into());
+    }
+    let (checkpoint, notes) = sph_core::checkpoint::read_latest(&args.dir)?;
+    for note in notes {
+        eprintln!("note: {note}");
+    }
+    let origin = checkpoint.origin.clone();
+    if origin.scenario.as_os_str().is_empty() {
+        return Err(format!(
+            "{}: the checkpoint does not record its scenario file (it was written by a program other than `engine`)",
+            checkpoint.file.display()
+        ));
+    }
+    let overrides = parse_overrides(&origin.sets)?;
+    let scenario = Scenario::load(&origin.scenario, &overrides, registry)
+        .map_err(|e| format!("{e}\n(the scenario the checkpoint was written for)"))?;
+    eprintln!(
+        "resuming {} from t = {} s (step {}) in {}",
+        origin.scenario.display(),
+        checkpoint.time,
+        checkpoint.step,
+        args.dir.display()
+    );
+    let opts = RunOptions {
+        out_dir: args.dir.clone(),
+        threads: args.threads,
+        progress: !args.quiet,
+        checkpoint_every: args.checkpoints.checkpoint_every,
+        stop_at: args.checkpoints.stop_at,
+        resume: Some(checkpoint),
+        interrupt: interrupt_flag(),
+        origin,
+        ..RunOptions::default()
+    };
+    execute(scenario, &opts, args.profile)
+}
+
 /// Loads and runs one scenario, printing the headline figures.
-pub fn run_scenario(args: &RunArgs, registry: &StageRegistry) -> Result<(), String> {
+pub fn run_scenario(args: &RunArgs, registry: &StageRegistry) -> Result<ExitCode, String> {
     let path = args
         .scenario
         .as_ref()
         .ok_or("give a scenario file, e.g. `engine scenarios/dam_break.ron`")?;
-    let overrides = args
-        .sets
-        .iter()
-        .map(|s| s.parse::<Override>().map_err(|e| e.to_string()))
-        .collect::<Result<Vec<_>, _>>()?;
+    let overrides = parse_overrides(&args.sets)?;
     if args.threads == Some(0) {
         return Err("--threads must be at least 1".into());
     }
@@ -104,22 +221,41 @@ pub fn run_scenario(args: &RunArgs, registry: &StageRegistry) -> Result<(), Stri
         .clone()
         .unwrap_or_else(|| PathBuf::from("out").join(&scenario.spec.name));
     if scenario.spec.sweep.is_some() {
-        return run_sweep(path, &overrides, registry, &out_dir, args.threads);
+        if args.checkpoints.checkpoint_every.is_some() || args.checkpoints.stop_at.is_some() {
+            return Err("--checkpoint-every and --stop-at do not apply to a sweep".into());
+        }
+        return run_sweep(path, &overrides, registry, &out_dir, args.threads)
+            .map(|()| ExitCode::SUCCESS);
     }
     let opts = RunOptions {
-        out_dir: out_dir.clone(),
+        out_dir,
         threads: args.threads,
         progress: !args.quiet,
         trace: args.trace.clone(),
+        checkpoint_every: args.checkpoints.checkpoint_every,
+        stop_at: args.checkpoints.stop_at,
+        interrupt: interrupt_flag(),
+        origin: Origin {
+            scenario: std::fs::canonicalize(path).unwrap_or_else(|_| path.clone()),
+            sets: args.sets.clone(),
+        },
+        ..RunOptions::default()
     };
+    execute(scenario, &opts, args.profile)
+}
+
+/// Runs a loaded scenario and prints the headline figures; the exit code is
+/// [`INTERRUPTED`] after a Ctrl-C (with its checkpoint written).
+fn execute(scenario: Scenario, opts: &RunOptions, profile: bool) -> Result<ExitCode, String> {
+    let out_dir = &opts.out_dir;
     let waves = sph_core::waves::WaveTheory::from_scenario(&scenario);
-    let result = run(scenario, &opts);
+    let result = run(scenario, opts);
     let summary = match &result {
         Ok(s) => s.clone(),
         Err(RunError::Step { summary, .. }) => (**summary).clone(),
         Err(e) => return Err(e.to_string()),
     };
-    if args.profile {
+    if profile {
         println!("{}", summary.profile_table());
     }
     println!(
@@ -133,15 +269,24 @@ pub fn run_scenario(args: &RunArgs, registry: &StageRegistry) -> Result<(), Stri
         summary.threads,
         out_dir.display()
     );
-    if let (Some(waves), Ok(_)) = (&waves, &result) {
-        report_waves(waves, &out_dir)?;
+    if summary.status != "completed" && result.is_ok() {
+        println!("{}", summary.status);
     }
-    result.map(|_| ()).map_err(|e| {
-        format!(
-            "{e}\n(outputs written so far are kept in {})",
-            out_dir.display()
-        )
-    })
+    if let (Some(waves), true) = (&waves, summary.status == "completed") {
+        report_waves(waves, out_dir)?;
+    }
+    let interrupted = summary.status.starts_with("interrupted");
+    result
+        .map(|_| match interrupted {
+            true => ExitCode::from(INTERRUPTED),
+            false => ExitCode::SUCCESS,
+        })
+        .map_err(|e| {
+            format!(
+                "{e}\n(outputs written so far are kept in {})",
+                out_dir.display()
+            )
+        })
 }
 
 /// A piston flume's gauges against Biesel and the dispersion relation: a line on the

@@ -2,6 +2,7 @@
 //! registry, the scenario loader, the runner with its profiling, and the output writers.
 //! The standard stages live in the `sph-stages` crate; the `engine` binary joins them.
 
+pub mod checkpoint;
 pub mod components;
 pub mod frame;
 pub mod kernel;

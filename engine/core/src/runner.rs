@@ -2,15 +2,19 @@
 //! spans, times every stage, shows progress, and writes `summary.json` and the
 //! resolved scenario — also when the run stops early.
 
+use crate::checkpoint::{Checkpoint, Dec, Origin, Resuming};
 use crate::components::{Fluid, Ghost};
 use crate::frame::write_fluid_frame;
+use crate::scenario::PipelineEntry;
 use crate::scenario::Scenario;
 use crate::sim::Sim;
 use crate::stage::{SetupError, StepError};
 use crate::world::count;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// How to run a scenario (the command line's options).
@@ -23,6 +27,17 @@ pub struct RunOptions {
     pub progress: bool,
     /// Write a Chrome/Perfetto trace of the stage spans here.
     pub trace: Option<PathBuf>,
+    /// Write a checkpoint about every this many seconds of simulated time.
+    pub checkpoint_every: Option<f64>,
+    /// Stop once the simulated time reaches this [s], writing a checkpoint.
+    pub stop_at: Option<f64>,
+    /// Continue from this checkpoint ([`crate::checkpoint::read_latest`]); the scenario
+    /// must be the one it was written for.
+    pub resume: Option<Checkpoint>,
+    /// Set (e.g. by a Ctrl-C handler) to stop the run with a checkpoint.
+    pub interrupt: Option<Arc<AtomicBool>>,
+    /// The scenario file and overrides, recorded in checkpoints for `engine resume`.
+    pub origin: Origin,
 }
 
 /// Time spent in one stage.
@@ -99,6 +114,9 @@ pub enum RunError {
     },
     #[error("output {path}: {message}")]
     Output { path: String, message: String },
+    /// A run option out of range (`--checkpoint-every`, `--stop-at`).
+    #[error("{0}")]
+    Options(String),
 }
 
 /// Runs a scenario to its end time. On an unstable step the run stops, writes the
@@ -148,17 +166,28 @@ fn run_in_pool(mut scenario: Scenario, opts: &RunOptions) -> Result<(Summary, Si
         path: out.display().to_string(),
         message: e.to_string(),
     };
-    std::fs::create_dir_all(out).map_err(io_err)?;
+    check_options(opts)?;
+    prepare_out_dir(out)?;
     // A stale frame from an earlier failed run in this folder would mislead.
     let _ = std::fs::remove_file(out.join("unstable.vtp"));
-    crate::output::atomic::write_atomic(
-        &out.join("scenario.resolved.ron"),
-        scenario.resolved_ron().as_bytes(),
-    )
-    .map_err(io_err)?;
+    let resolved = scenario.resolved_ron();
+    let fingerprint = crate::checkpoint::fingerprint(&resolved);
+    if let Some(c) = &opts.resume {
+        if c.fingerprint != fingerprint {
+            return Err(RunError::Output {
+                path: c.file.display().to_string(),
+                message: "the checkpoint was written for another scenario (the scenario file, its overrides or the engine's defaults changed since); rerun from the start".into(),
+            });
+        }
+    }
+    crate::output::atomic::write_atomic(&out.join("scenario.resolved.ron"), resolved.as_bytes())
+        .map_err(io_err)?;
 
     let mut sim = scenario.build_sim(out.clone());
     let mut pipeline = std::mem::take(&mut scenario.spec.pipeline);
+    if let Some(c) = &opts.resume {
+        sim.resources.insert(Resuming { time: c.time });
+    }
     for entry in &mut pipeline {
         let _span = tracing::info_span!("setup", stage = entry.name.as_str()).entered();
         entry.stage.setup(&mut sim)?;
@@ -177,10 +206,28 @@ fn run_in_pool(mut scenario: Scenario, opts: &RunOptions) -> Result<(Summary, Si
         status: "running".into(),
         ..Summary::default()
     };
+    let mut ghost_sum = 0.0;
+    if let Some(c) = &opts.resume {
+        restore(c, &mut sim, &mut pipeline, &mut summary, &mut ghost_sum).map_err(|message| {
+            RunError::Output {
+                path: c.file.display().to_string(),
+                message,
+            }
+        })?;
+    }
+    let start_step = sim.clock.step;
+    // Checkpoints fall on steps where every stage runs next, so the stages' outputs
+    // (neighbour lists, ...) are all rebuilt on the first step after a resume.
+    let period = pipeline
+        .iter()
+        .fold(1u64, |l, e| lcm(l, e.every.max(1) as u64));
+    let mut next_checkpoint = opts
+        .checkpoint_every
+        .map(|every| every * ((sim.clock.time / every).floor() + 1.0));
     let progress = progress_bar(opts.progress, sim.clock.end_time);
     let start = Instant::now();
-    let mut ghost_sum = 0.0;
     let mut failure = None;
+    let mut paused = None;
     'steps: while sim.clock.time < sim.clock.end_time * (1.0 - 1e-12) {
         let step = sim.clock.step;
         let _span = tracing::info_span!("step", step).entered();
@@ -212,15 +259,52 @@ fn run_in_pool(mut scenario: Scenario, opts: &RunOptions) -> Result<(Summary, Si
         }
         ghost_sum += count::<Ghost>(&sim.world) as f64;
         if step.is_multiple_of(20) {
-            update_progress(&progress, &sim, summary.fluid_particles, start.elapsed());
+            let steps = sim.clock.step - start_step;
+            update_progress(
+                &progress,
+                &sim,
+                summary.fluid_particles * steps as usize,
+                start.elapsed(),
+            );
+        }
+        let done = sim.clock.time >= sim.clock.end_time * (1.0 - 1e-12);
+        if done || !sim.clock.step.is_multiple_of(period) {
+            continue;
+        }
+        let interrupted = opts
+            .interrupt
+            .as_ref()
+            .is_some_and(|f| f.load(Ordering::Relaxed));
+        let stop = opts.stop_at.is_some_and(|t| sim.clock.time >= t);
+        let due = next_checkpoint.is_some_and(|t| sim.clock.time >= t * (1.0 - 1e-12));
+        if !(interrupted || stop || due) {
+            continue;
+        }
+        summary.steps = sim.clock.step;
+        if let Err(error) = checkpoint(&sim, &mut pipeline, &summary, ghost_sum, fingerprint, opts)
+        {
+            failure = Some(("checkpoint".into(), sim.clock.step, error));
+            break;
+        }
+        if let (Some(every), Some(next)) = (opts.checkpoint_every, &mut next_checkpoint) {
+            *next = every * ((sim.clock.time / every).floor() + 1.0);
+        }
+        if interrupted || stop {
+            paused = Some(if interrupted {
+                "interrupted"
+            } else {
+                "paused (--stop-at)"
+            });
+            break;
         }
     }
     summary.steps = sim.clock.step;
     summary.simulated_time = sim.clock.time;
     summary.wall_seconds = start.elapsed().as_secs_f64();
     summary.ghost_particles_mean = ghost_sum / (summary.steps.max(1) as f64);
-    summary.particle_steps_per_second =
-        summary.fluid_particles as f64 * summary.steps as f64 / summary.wall_seconds.max(1e-9);
+    summary.particle_steps_per_second = summary.fluid_particles as f64
+        * (summary.steps - start_step) as f64
+        / summary.wall_seconds.max(1e-9);
     progress.finish_and_clear();
     summary.diagnostics = sim.diagnostics.clone();
 
@@ -231,6 +315,13 @@ fn run_in_pool(mut scenario: Scenario, opts: &RunOptions) -> Result<(Summary, Si
         );
         // Keep the offending state for inspection; a failure here must not hide the first.
         let _ = write_fluid_frame(&sim, &out.join("unstable.vtp"));
+    } else if let Some(how) = paused {
+        summary.status = format!(
+            "{how} at step {}, t = {:.6} s, with a checkpoint: continue with `engine resume {}`",
+            sim.clock.step,
+            sim.clock.time,
+            out.display()
+        );
     } else {
         summary.status = "completed".into();
     }
@@ -255,6 +346,135 @@ fn run_in_pool(mut scenario: Scenario, opts: &RunOptions) -> Result<(Summary, Si
     }
 }
 
+/// Refuses checkpoint options that make no sense, before anything is written.
+fn check_options(opts: &RunOptions) -> Result<(), RunError> {
+    let bad = |name: &str, v: f64| {
+        RunError::Options(format!("{name} {v} is out of range; accepted: seconds > 0"))
+    };
+    if let Some(t) = opts
+        .checkpoint_every
+        .filter(|t| !(*t > 0.0 && t.is_finite()))
+    {
+        return Err(bad("--checkpoint-every", t));
+    }
+    if let Some(t) = opts.stop_at.filter(|t| !(*t > 0.0 && t.is_finite())) {
+        return Err(bad("--stop-at", t));
+    }
+    Ok(())
+}
+
+/// Creates the output folder and checks, by writing and removing a small file, that
+/// outputs can be written there: an unwritable folder or a full disk is reported
+/// before the run rather than when the first output is due.
+pub fn prepare_out_dir(out: &Path) -> Result<(), RunError> {
+    let err = |path: &Path, what: &str, e: std::io::Error| RunError::Output {
+        path: path.display().to_string(),
+        message: format!("{what}: {e}"),
+    };
+    std::fs::create_dir_all(out).map_err(|e| err(out, "cannot create the output folder", e))?;
+    let probe = out.join(".write_test.tmp");
+    let written = std::fs::File::create(&probe).and_then(|mut f| {
+        use std::io::Write;
+        f.write_all(&[0u8; 4096])?;
+        f.sync_all()
+    });
+    let _ = std::fs::remove_file(&probe);
+    written.map_err(|e| err(out, "the output folder is not writable", e))
+}
+
+fn gcd(a: u64, b: u64) -> u64 {
+    if b == 0 {
+        a
+    } else {
+        gcd(b, a % b)
+    }
+}
+
+fn lcm(a: u64, b: u64) -> u64 {
+    (a / gcd(a, b)).saturating_mul(b)
+}
+
+/// Writes a checkpoint of the state between two steps.
+fn checkpoint(
+    sim: &Sim,
+    pipeline: &mut [PipelineEntry],
+    summary: &Summary,
+    ghost_sum: f64,
+    fingerprint: u64,
+    opts: &RunOptions,
+) -> Result<(), StepError> {
+    let c = &sim.clock;
+    let mut e = crate::checkpoint::begin(c.step, c.time, fingerprint, &opts.origin);
+    e.f64(c.time);
+    e.f64(c.dt);
+    e.u64(c.step);
+    e.f64(ghost_sum);
+    e.u64(sim.diagnostics.len() as u64);
+    for (k, v) in &sim.diagnostics {
+        e.str(k);
+        e.f64(*v);
+    }
+    crate::checkpoint::put_particles(&mut e, &sim.world);
+    e.u64(pipeline.len() as u64);
+    for (entry, time) in pipeline.iter_mut().zip(&summary.stages) {
+        e.str(&entry.name);
+        e.u64(time.calls);
+        e.f64(time.seconds);
+        e.bytes(&entry.stage.save_state(sim)?);
+    }
+    let bytes = crate::checkpoint::seal(e);
+    crate::checkpoint::write(&opts.out_dir, &bytes).map_err(|message| StepError::Output {
+        path: "checkpoint".into(),
+        message,
+    })
+}
+
+/// Puts the state of checkpoint `c` into a freshly set-up run.
+fn restore(
+    c: &Checkpoint,
+    sim: &mut Sim,
+    pipeline: &mut [PipelineEntry],
+    summary: &mut Summary,
+    ghost_sum: &mut f64,
+) -> Result<(), String> {
+    let mut d = Dec::new(&c.payload);
+    sim.clock.time = d.f64()?;
+    sim.clock.dt = d.f64()?;
+    sim.clock.step = d.u64()?;
+    *ghost_sum = d.f64()?;
+    let n = d.len(16)?;
+    sim.diagnostics.clear();
+    for _ in 0..n {
+        let k = d.str()?;
+        sim.diagnostics.insert(k, d.f64()?);
+    }
+    crate::checkpoint::get_particles(&mut d, &mut sim.world)?;
+    let n = d.len(8)?;
+    if n != pipeline.len() {
+        return Err(format!(
+            "the checkpoint has {n} stages, the scenario's pipeline {}",
+            pipeline.len()
+        ));
+    }
+    for (entry, time) in pipeline.iter_mut().zip(summary.stages.iter_mut()) {
+        let name = d.str()?;
+        if name != entry.name {
+            return Err(format!(
+                "the checkpoint has stage `{name}` where the pipeline has `{}`",
+                entry.name
+            ));
+        }
+        time.calls = d.u64()?;
+        time.seconds = d.f64()?;
+        let state = d.bytes()?;
+        entry
+            .stage
+            .load_state(sim, state)
+            .map_err(|e| format!("stage `{name}`: {e}"))?;
+    }
+    d.end()
+}
+
 fn progress_bar(show: bool, end_time: f64) -> ProgressBar {
     if !show {
         return ProgressBar::hidden();
@@ -269,9 +489,10 @@ fn progress_bar(show: bool, end_time: f64) -> ProgressBar {
     bar
 }
 
-fn update_progress(bar: &ProgressBar, sim: &Sim, particles: usize, elapsed: Duration) {
+/// `particle_steps`: particle-steps done by this session (not before a resume).
+fn update_progress(bar: &ProgressBar, sim: &Sim, particle_steps: usize, elapsed: Duration) {
     bar.set_position((sim.clock.time * 1e4) as u64);
-    let rate = particles as f64 * sim.clock.step as f64 / elapsed.as_secs_f64().max(1e-9);
+    let rate = particle_steps as f64 / elapsed.as_secs_f64().max(1e-9);
     bar.set_message(format!(
         "{:.3} / {:.3} s, step {}, dt {:.2e} s, {:.2e} particle-steps/s",
         sim.clock.time, sim.clock.end_time, sim.clock.step, sim.clock.dt, rate

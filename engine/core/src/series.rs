@@ -2,9 +2,12 @@
 //! per sample, flushed at least every two seconds of wall time so a killed run keeps
 //! what it reported. The rows are also kept in memory for the end-of-run plots.
 
+use crate::checkpoint::Resuming;
+use crate::output::atomic::write_atomic;
 use crate::output::plot::{plot_series, Series, Style};
+use crate::sim::Sim;
 use crate::stage::StepError;
-use std::fs::File;
+use std::fs::{File, OpenOptions};
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -36,6 +39,72 @@ impl SeriesWriter {
             .map_err(|e| StepError::output(path, e))?;
         w.flush()?;
         Ok(w)
+    }
+
+    /// [`SeriesWriter::create`], or on a run resuming from a checkpoint
+    /// ([`crate::checkpoint::Resuming`] among the resources) [`SeriesWriter::resume`].
+    pub fn open(sim: &Sim, path: &Path, columns: Vec<String>) -> Result<Self, StepError> {
+        match sim.resources.get::<Resuming>() {
+            Some(r) => Self::resume(path, columns, r.time),
+            None => Self::create(path, columns),
+        }
+    }
+
+    /// [`SeriesWriter::open`] for a stage sampling every `interval` seconds, first
+    /// refusing an interval that would give more than [`MAX_SAMPLES`] rows over the
+    /// run ([`check_samples`]). The error is the message for the stage's setup.
+    pub fn open_sampled(
+        sim: &Sim,
+        path: &Path,
+        columns: Vec<String>,
+        interval: f64,
+    ) -> Result<Self, String> {
+        check_samples(sim.clock.end_time, interval, MAX_SAMPLES, "rows")?;
+        Self::open(sim, path, columns).map_err(|e| e.to_string())
+    }
+
+    /// Continues a file an earlier run wrote: keeps the header and the rows up to
+    /// simulated time `time` (those a checkpoint taken then had flushed), drops the
+    /// rest (rows written after the checkpoint, or a half-written last line), and
+    /// appends from there. The header must match `columns`.
+    pub fn resume(path: &Path, columns: Vec<String>, time: f64) -> Result<Self, StepError> {
+        let err = |m: String| StepError::output(path, format!("cannot resume: {m}"));
+        let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
+        let header = format!("time,{}", columns.join(","));
+        let mut lines = text.split_inclusive('\n');
+        if lines.next().map(str::trim_end) != Some(header.as_str()) {
+            return Err(err(format!(
+                "its header is not `{header}` (the file was changed, or the scenario's columns differ)"
+            )));
+        }
+        let mut kept = format!("{header}\n");
+        let mut rows = Vec::new();
+        for line in lines {
+            let Some(line) = line.strip_suffix('\n') else {
+                break; // a half-written last line
+            };
+            let values: Result<Vec<f64>, _> = line.split(',').map(str::parse::<f64>).collect();
+            let Ok(mut values) = values else { break };
+            if values.len() != columns.len() + 1 || values[0] > time {
+                break;
+            }
+            let t = values.remove(0);
+            rows.push((t, values));
+            kept.push_str(line);
+            kept.push('\n');
+        }
+        write_atomic(path, kept.as_bytes()).map_err(|e| StepError::output(path, e))?;
+        let file = OpenOptions::new()
+            .append(true)
+            .open(path)
+            .map_err(|e| StepError::output(path, e))?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            columns,
+            file: BufWriter::new(file),
+            last_flush: Instant::now(),
+            rows,
+        })
     }
 
     pub fn columns(&self) -> &[String] {
@@ -93,5 +162,50 @@ impl SeriesWriter {
             .collect();
         plot_series(path, title, "time [s]", y_label, &series)
             .map_err(|e| StepError::output(path, e))
+    }
+}
+
+/// The most rows a time series (or frames a frame sequence) may hold: each row is also
+/// kept in memory for the plots, so more would risk exhausting it.
+pub const MAX_SAMPLES: f64 = 5e6;
+
+/// Refuses, before the run, a sampling `interval` [s] that would give more than
+/// `max` samples over `end_time`; the message names the stage's `interval` field. An
+/// interval of 0 (every step) is not checked here.
+pub fn check_samples(end_time: f64, interval: f64, max: f64, what: &str) -> Result<(), String> {
+    if interval > 0.0 && end_time / interval > max {
+        return Err(format!(
+            "field `interval` = {interval} s gives {:.0} {what} over end_time = {end_time} s; accepted: at most {max:.0} (use a longer interval or a shorter run)",
+            (end_time / interval).ceil()
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn resume_keeps_rows_up_to_the_checkpoint_and_drops_a_half_line() {
+        let dir = std::env::temp_dir().join(format!("sph_core_series_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("s.csv");
+        let columns = vec!["a".to_string(), "b".to_string()];
+        std::fs::write(&path, "time,a,b\n0,1,2\n0.1,3,NaN\n0.2,5,6\n0.3,7").unwrap();
+        let mut w = SeriesWriter::resume(&path, columns.clone(), 0.1).unwrap();
+        assert_eq!(w.column("a"), [(0.0, 1.0), (0.1, 3.0)]);
+        w.push(0.15, vec![9.0, 10.0]).unwrap();
+        w.flush().unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert_eq!(text, "time,a,b\n0,1,2\n0.1,3,NaN\n0.15,9,10\n");
+        // Past a half-written line nothing is kept; a wrong header is refused.
+        std::fs::write(&path, "time,a,b\n0,1,2\n0.1,3").unwrap();
+        let w = SeriesWriter::resume(&path, columns.clone(), 1.0).unwrap();
+        assert_eq!(w.column("b"), [(0.0, 2.0)]);
+        std::fs::write(&path, "time,a\n0,1\n").unwrap();
+        let err = SeriesWriter::resume(&path, columns, 1.0).err().unwrap();
+        assert!(err.to_string().contains("header"), "{err}");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -23,6 +23,20 @@ pub trait Stage: Send {
     fn finish(&mut self, _sim: &mut Sim) -> Result<(), StepError> {
         Ok(())
     }
+
+    /// The stage's private state for a checkpoint (counters, next sample time,
+    /// per-particle columns it owns), encoded with [`crate::checkpoint::Enc`]. Stages
+    /// that write files flush them here, so the files hold every row up to the
+    /// checkpoint. Stateless stages keep the default (nothing). Called between steps.
+    fn save_state(&mut self, _sim: &Sim) -> Result<Vec<u8>, StepError> {
+        Ok(Vec::new())
+    }
+
+    /// Restores what [`Stage::save_state`] wrote, after [`Stage::setup`] on a run that
+    /// resumes from a checkpoint (the particles and the clock are already restored).
+    fn load_state(&mut self, _sim: &mut Sim, _state: &[u8]) -> Result<(), String> {
+        Ok(())
+    }
 }
 
 /// A stage cannot start: the message says what is missing and how to fix the scenario.

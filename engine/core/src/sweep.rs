@@ -262,6 +262,7 @@ fn run_case(
         threads: Some(1),
         progress: false,
         trace: None,
+        ..Default::default()
     };
     let summary = match run(scenario, &opts) {
         Ok(s) => s,

@@ -271,6 +271,16 @@ impl PvdIndex {
         write_atomic(&self.path, self.document().as_bytes())
     }
 
+    /// Replaces the entries (a run resuming from a checkpoint) and rewrites the .pvd
+    /// when there are any.
+    pub fn restore(&mut self, entries: Vec<(f64, String)>) -> io::Result<()> {
+        self.entries = entries;
+        if self.entries.is_empty() {
+            return Ok(());
+        }
+        write_atomic(&self.path, self.document().as_bytes())
+    }
+
     /// Path of the `.pvd` file.
     pub fn path(&self) -> &Path {
         &self.path

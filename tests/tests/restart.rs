@@ -1,0 +1,269 @@
+//! Checkpoint and restart (issue 5): a run stopped with a checkpoint and resumed
+//! writes byte-identical probes.csv and energy.csv to a run never stopped, with a
+//! moving piston and a rolling tank; a damaged newest checkpoint or a leftover
+//! temporary file falls back to the previous checkpoint; an unwritable output folder
+//! and absurd sizes are refused before the run with a message naming the culprit.
+
+use sph_core::checkpoint::{read_latest, LATEST, PREVIOUS, TEMPORARY};
+use sph_core::runner::{run, RunOptions};
+use sph_core::Scenario;
+use sph_tests::support::{load, temp_out};
+use std::path::{Path, PathBuf};
+
+const WAVE: &str = include_str!("../../scenarios/wave_maker.ron");
+const SLOSHING: &str = include_str!("../../scenarios/sloshing.ron");
+
+/// A coarse wave maker: 630 particles, the piston moving from the start, particles
+/// sorted every 7 steps (so a checkpoint falls between two sorts).
+const WAVE_COARSE: [&str; 7] = [
+    "resolution=Spacing(0.08)",
+    "pipeline.neighbour_grid.sort_every=7",
+    "end_time=0.6",
+    "piston.ramp=0.0",
+    "pipeline.vtk_frames.interval=0.25",
+    "pipeline.probe.plots=false",
+    "pipeline.energy.plots=false",
+];
+
+/// A coarse rolling tank: 160 particles, particle sorting every 20 steps, Shepard
+/// every 20 steps.
+const SLOSHING_COARSE: [&str; 6] = [
+    "resolution=ParticlesAcross(40)",
+    "end_time=0.5",
+    "pipeline.vtk_frames.interval=0.2",
+    "pipeline.probe.plots=false",
+    "pipeline.energy.plots=false",
+    "tank.motion.ramp=0.0",
+];
+
+fn wave() -> Scenario {
+    load(WAVE, "scenarios/wave_maker.ron", &WAVE_COARSE)
+}
+
+fn sloshing() -> Scenario {
+    load(SLOSHING, "scenarios/sloshing.ron", &SLOSHING_COARSE)
+}
+
+fn options(out: &Path, threads: usize) -> RunOptions {
+    RunOptions {
+        out_dir: out.to_path_buf(),
+        threads: Some(threads),
+        ..RunOptions::default()
+    }
+}
+
+/// Runs to the end; returns the folder.
+fn uninterrupted(scenario: Scenario, tag: &str) -> PathBuf {
+    let out = temp_out(tag);
+    let summary = run(scenario, &options(&out, 2)).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(summary.status, "completed");
+    out
+}
+
+/// Runs with checkpoints every `every` s and stops at `stop` s; returns the folder.
+fn stopped(scenario: Scenario, tag: &str, every: Option<f64>, stop: f64) -> PathBuf {
+    let out = temp_out(tag);
+    let opts = RunOptions {
+        checkpoint_every: every,
+        stop_at: Some(stop),
+        ..options(&out, 2)
+    };
+    let summary = run(scenario, &opts).unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        summary.status.starts_with("paused (--stop-at) at step"),
+        "{}",
+        summary.status
+    );
+    assert!(out.join(LATEST).exists());
+    out
+}
+
+/// Resumes the run in `out` from its newest usable checkpoint; returns the notes.
+fn resume(scenario: Scenario, out: &Path, threads: usize) -> Vec<String> {
+    let (checkpoint, notes) = read_latest(out).unwrap_or_else(|e| panic!("{e}"));
+    let opts = RunOptions {
+        resume: Some(checkpoint),
+        ..options(out, threads)
+    };
+    let summary = run(scenario, &opts).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(summary.status, "completed");
+    notes
+}
+
+/// The two runs' series and frame indexes are byte-identical; removes both folders.
+fn same_outputs_then_clean(a: PathBuf, b: PathBuf) {
+    for f in ["probes.csv", "energy.csv", "frames.pvd", "walls.pvd"] {
+        let (x, y) = (std::fs::read(a.join(f)), std::fs::read(b.join(f)));
+        let (x, y) = (x.unwrap(), y.unwrap_or_else(|e| panic!("{f}: {e}")));
+        assert!(x.len() > 100, "{f} is nearly empty");
+        assert!(x == y, "{f} differs between the two runs");
+    }
+    for dir in [a, b] {
+        let _ = std::fs::remove_dir_all(dir);
+    }
+}
+
+#[test]
+fn a_resumed_piston_run_is_bit_identical() {
+    let full = uninterrupted(wave(), "restart-wave-full");
+    // 0.3 s is not a multiple of Reinitialise(every: 20) x 1 ms: the stop waits for one.
+    let part = stopped(wave(), "restart-wave-part", None, 0.29);
+    resume(wave(), &part, 1);
+    same_outputs_then_clean(full, part);
+}
+
+#[test]
+fn a_resumed_rolling_tank_is_bit_identical_and_a_damaged_checkpoint_falls_back() {
+    let full = uninterrupted(sloshing(), "restart-slosh-full");
+    let part = stopped(sloshing(), "restart-slosh-part", Some(0.1), 0.25);
+    let (newest, _) = read_latest(&part).unwrap();
+    // Damage the newest checkpoint as a kill during its write might (truncated), and
+    // leave a temporary file behind: the previous checkpoint must take over.
+    let bytes = std::fs::read(part.join(LATEST)).unwrap();
+    std::fs::write(part.join(LATEST), &bytes[..bytes.len() / 2]).unwrap();
+    std::fs::write(part.join(TEMPORARY), b"half a checkpoint").unwrap();
+    let (previous, notes) = read_latest(&part).unwrap();
+    assert!(previous.time < newest.time, "fell back to an earlier one");
+    let text = notes.join("\n");
+    assert!(text.contains("interrupted"), "{text}");
+    assert!(
+        text.contains("falling back") && text.contains(PREVIOUS),
+        "{text}"
+    );
+    assert!(!part.join(TEMPORARY).exists());
+    // The moved damaged file no longer masks the previous one.
+    let notes = resume(sloshing(), &part, 1);
+    assert!(notes.is_empty(), "{notes:?}");
+    same_outputs_then_clean(full, part);
+}
+
+#[test]
+fn garbled_or_missing_checkpoints_are_reported() {
+    let out = temp_out("restart-garbled");
+    std::fs::create_dir_all(&out).unwrap();
+    let err = read_latest(&out).unwrap_err();
+    assert!(err.contains("no checkpoint in"), "{err}");
+    std::fs::write(out.join(LATEST), b"SPHCKPT\0 garbage garbage garbage").unwrap();
+    let err = read_latest(&out).unwrap_err();
+    assert!(err.contains(LATEST) && err.contains("checksum"), "{err}");
+    assert!(err.contains("no previous checkpoint"), "{err}");
+    let _ = std::fs::remove_dir_all(out);
+}
+
+#[test]
+fn a_checkpoint_of_another_scenario_is_refused() {
+    let part = stopped(wave(), "restart-other", None, 0.05);
+    let (checkpoint, _) = read_latest(&part).unwrap();
+    let other = load(
+        WAVE,
+        "scenarios/wave_maker.ron",
+        &[&WAVE_COARSE[..], &["piston.stroke=0.1"]].concat(),
+    );
+    let opts = RunOptions {
+        resume: Some(checkpoint),
+        ..options(&part, 1)
+    };
+    let err = run(other, &opts).unwrap_err().to_string();
+    assert!(err.contains("another scenario"), "{err}");
+    let _ = std::fs::remove_dir_all(part);
+}
+
+#[test]
+fn an_unwritable_output_folder_is_reported_before_the_run() {
+    // A folder under a regular file cannot be created (even by root).
+    let base = temp_out("restart-unwritable");
+    std::fs::create_dir_all(&base).unwrap();
+    let file = base.join("a_file");
+    std::fs::write(&file, b"x").unwrap();
+    let err = run(wave(), &options(&file.join("out"), 1))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("cannot create the output folder"), "{err}");
+    assert!(err.contains("a_file"), "{err}");
+    // A folder that exists but takes no files (even for root).
+    if cfg!(target_os = "linux") {
+        let err = run(wave(), &options(Path::new("/proc/self"), 1))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("not writable") && err.contains("/proc/self"),
+            "{err}"
+        );
+    }
+    let _ = std::fs::remove_dir_all(base);
+}
+
+#[test]
+fn absurd_sizes_are_refused_before_allocation() {
+    let registry = sph_stages::standard_registry();
+    let try_run = |sets: &[&str]| -> String {
+        let overrides: Vec<_> = WAVE_COARSE
+            .iter()
+            .chain(sets)
+            .map(|o| o.parse().unwrap())
+            .collect();
+        let out = temp_out("restart-absurd");
+        let result = Scenario::from_str(WAVE, "wave_maker.ron", &overrides, &registry)
+            .map_err(|e| e.to_string())
+            .and_then(|s| run(s, &options(&out, 1)).map_err(|e| e.to_string()));
+        let _ = std::fs::remove_dir_all(out);
+        result.expect_err("refused")
+    };
+    // Too many particles: the loader names `resolution`.
+    let err = try_run(&["resolution=Spacing(0.0001)"]);
+    assert!(
+        err.contains("resolution") && err.contains("would not fit"),
+        "{err}"
+    );
+    // A vast tank around a little water: too many grid cells.
+    let err = try_run(&["tank.width=50000.0", "tank.height=50000.0"]);
+    assert!(
+        err.contains("neighbour_grid") && err.contains("grid cells"),
+        "{err}"
+    );
+    // A sampling interval giving billions of rows, and of frames.
+    let err = try_run(&["end_time=1000.0", "pipeline.probe.interval=1e-7"]);
+    assert!(err.contains("probe") && err.contains("`interval`"), "{err}");
+    let err = try_run(&["pipeline.vtk_frames.interval=1e-6"]);
+    assert!(
+        err.contains("vtk_frames") && err.contains("frames"),
+        "{err}"
+    );
+}
+
+/// A full disk, simulated with /dev/full (every write fails with ENOSPC): the error
+/// names the file, the run does not panic, and earlier checkpoints are untouched.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_full_disk_is_reported_with_the_file_name() {
+    use std::os::unix::fs::symlink;
+    if !Path::new("/dev/full").exists() {
+        return;
+    }
+    // A CSV series on a full disk: refused at setup.
+    let out = temp_out("restart-full-csv");
+    std::fs::create_dir_all(&out).unwrap();
+    symlink("/dev/full", out.join("energy.csv")).unwrap();
+    let err = run(wave(), &options(&out, 1)).unwrap_err().to_string();
+    assert!(
+        err.contains("energy.csv") && err.contains("No space left"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&out);
+
+    // A checkpoint on a full disk: the run stops with the file named.
+    let out = temp_out("restart-full-checkpoint");
+    std::fs::create_dir_all(&out).unwrap();
+    symlink("/dev/full", out.join(TEMPORARY)).unwrap();
+    let opts = RunOptions {
+        stop_at: Some(0.05),
+        ..options(&out, 1)
+    };
+    let err = run(wave(), &opts).unwrap_err().to_string();
+    assert!(
+        err.contains(TEMPORARY) && err.contains("No space left"),
+        "{err}"
+    );
+    assert!(!out.join(LATEST).exists());
+    let _ = std::fs::remove_dir_all(&out);
+}
