@@ -207,7 +207,8 @@ pub struct WaveTheory {
     pub height: f64,
     /// Gauges (name, x [m]).
     pub gauges: Vec<(String, f64)>,
-    /// Analysis window [s]: the last four periods of the run.
+    /// Analysis window [s]: the last four periods of the run, from when the fully
+    /// ramped wave has reached the farthest gauge at the group velocity on.
     pub window: (f64, f64),
 }
 
@@ -224,7 +225,8 @@ pub struct WaveReport {
 }
 
 impl WaveTheory {
-    /// For a scenario with a sinusoidal piston and wave gauges; None otherwise.
+    /// For a scenario with a sinusoidal piston and wave gauges that the ramped wave
+    /// reaches at least two periods before the end; None otherwise.
     pub fn from_scenario(scenario: &Scenario) -> Option<Self> {
         let piston = scenario.spec.piston.as_ref()?;
         let (stroke, period) = (piston.stroke?, piston.period?.0);
@@ -236,6 +238,20 @@ impl WaveTheory {
         let g = scenario.spec.fluid.gravity.1.abs();
         let k = wavenumber(omega, depth, g);
         let end = scenario.spec.end_time.0;
+        // Group velocity c_g = (omega / 2k)(1 + 2kd / sinh 2kd).
+        let group = omega / (2.0 * k) * (1.0 + 2.0 * k * depth / (2.0 * k * depth).sinh());
+        let farthest = scenario
+            .spec
+            .wave_gauges
+            .iter()
+            .map(|g| g.x - piston.x)
+            .fold(0.0, f64::max);
+        let ramp = piston.ramp.unwrap_or(2.0 * period);
+        let arrival = ramp + farthest / group;
+        let start = (end - 4.0 * period).max(arrival);
+        if end - start < 2.0 * period {
+            return None;
+        }
         Some(Self {
             depth,
             omega,
@@ -247,7 +263,7 @@ impl WaveTheory {
                 .iter()
                 .map(|g| (g.name.clone(), g.x))
                 .collect(),
-            window: ((end - 4.0 * period).max(0.0), end),
+            window: (start, end),
         })
     }
 
@@ -316,7 +332,8 @@ impl WaveReport {
         let th = &self.theory;
         let pct = |m: f64, t: f64| format!("{:+.1} %", 100.0 * (m / t - 1.0));
         let mut md = format!(
-            "# Waves against linear theory\n\nWindow {:.2}-{:.2} s (the last four periods). \
+            "# Waves against linear theory\n\nWindow {:.2}-{:.2} s (at most the last four periods, \
+             after the ramped wave has reached the farthest gauge). \
              Depth d = {:.4} m, omega = {:.4} rad/s; dispersion k = {:.4} 1/m \
              (L = {:.4} m, kd = {:.3}); Biesel H = {:.4} m.\n\n\
              | gauge | x [m] | H first harmonic [m] | error | H zero up-crossing [m] | error |\n\
