@@ -1,8 +1,7 @@
 //! Piston wave maker (scenes.md `wave_maker`, analytic.md section 5): the paddle
 //! follows its prescribed stroke, feels the hydrostatic force at rest, and no particle
-//! gets through it or out of the flume. The wave height and wavelength against Biesel
-//! and the dispersion relation need the shipped scenario's 20 s run, an ignored test
-//! here (docs/validation.md, "Wave maker").
+//! gets through it or out of the flume, and a regular wave has Biesel's height and the
+//! dispersion relation's wavelength (docs/validation.md, "Wave maker").
 
 use sph_core::components::{Fluid, Mass, Position};
 use sph_core::waves::WaveTheory;
@@ -37,8 +36,9 @@ fn a_paddle_at_rest_feels_the_hydrostatic_force() {
     // Method I at the paddle: the pressure of particles ds/2 from the wall, carried by
     // the hydrostatic ghosts; the surface layer (Shepard sums cut by the free surface)
     // and the 1 % compression of the column at c_0 = 20 m/s give errors of order
-    // ds/d = 5 % of the top cell's share, about 1-2 % in all (measured +0.7 % at
-    // d/ds = 25). 3 %.
+    // ds/d = 5 % of the top cell's share, about 1-2 % in all, more with a wider kernel
+    // (measured at d/ds = 20: +0.7 % with h = 1.3 ds, +2.4 % with the shipped 2 ds,
+    // whose sums are cut for more of the surface particles). 3 %.
     assert!(
         (first / expected - 1.0).abs() < 0.03,
         "force at rest {first:.1} N/m, expected {expected:.1} N/m"
@@ -118,14 +118,14 @@ fn a_bad_piston_is_refused_with_its_place() {
     }
 }
 
-/// The shipped flume against linear theory over t = 14-20 s (the last four periods of a
-/// 20 s run: the wave train and its reflection from the damping zone are established).
-/// About ten minutes on 2 cores, so outside the suite:
-/// `cargo test --release -p sph-tests --test wave_maker -- --ignored`.
+/// A regular wave against linear theory at half the shipped resolution (d/ds = 12.5,
+/// H/ds = 1.35) over the 12 s run's last four periods, 6-12 s (the ramped wave reaches
+/// the farthest gauge at 5.4 s). With h = 2 ds this resolution is enough (measured: H +2.9 / +2.0 /
+/// -5.0 %, k -0.8 %, reflection 0.03); the kernel support, not ds, sets the dispersion
+/// error (h = 1.3 ds gives a wave 7-12 % long at d/ds = 12.5 and 25; docs/validation.md).
 #[test]
-#[ignore = "long: about ten minutes on 2 cores"]
 fn a_regular_wave_matches_biesel_and_the_dispersion_relation() {
-    let mut overrides = vec!["end_time=20.0"];
+    let mut overrides = vec!["resolution=Spacing(0.04)"];
     overrides.extend(QUIET);
     let scenario = load(SCENE, "scenarios/wave_maker.ron", &overrides);
     let theory = WaveTheory::from_scenario(&scenario).expect("a sinusoidal piston and gauges");
@@ -144,8 +144,8 @@ fn a_regular_wave_matches_biesel_and_the_dispersion_relation() {
     }
     let k_error = report.k_error().expect("three gauges give k");
     assert!(k_error.abs() < 0.03, "k {:+.1} % off", 100.0 * k_error);
-    // The damping zone is one wavelength long; a zone that long returns under 10 % of
-    // the wave (Ursell-type sponge layers, e.g. Mayer et al. 1998, reach 5-10 %).
+    // A reflected wave of R times the incident one makes the gauge heights vary by up
+    // to +-R along the flume; R < 10 % keeps that inside the height tolerance.
     let r = report.reflection().unwrap();
     assert!(r < 0.10, "reflection {r:.3}");
     let _ = std::fs::remove_dir_all(out);
