@@ -2,6 +2,7 @@
 //! `engine::main_with(registry)` after registering its stages.
 
 pub mod bench;
+pub mod study;
 
 use clap::{Parser, Subcommand};
 use sph_core::overrides::Override;
@@ -30,6 +31,8 @@ pub enum Command {
     Stages,
     /// Benchmark the dam break over sizes and thread counts (bench.csv, bench.md).
     Bench(bench::BenchArgs),
+    /// Run a sensitivity study (scenarios/studies/*.ron): study.csv, report.md, figures.
+    Study(study::StudyArgs),
 }
 
 /// Running one scenario.
@@ -68,6 +71,13 @@ pub fn main_with(registry: StageRegistry) -> ExitCode {
             ExitCode::SUCCESS
         }
         Some(Command::Bench(args)) => match bench::main(&args) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(message) => {
+                eprintln!("error: {message}");
+                ExitCode::FAILURE
+            }
+        },
+        Some(Command::Study(args)) => match study::main(&args, &registry) {
             Ok(()) => ExitCode::SUCCESS,
             Err(message) => {
                 eprintln!("error: {message}");
