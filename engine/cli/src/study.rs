@@ -2,7 +2,7 @@
 //! report.md and the figures (see `sph_core::study`).
 
 use sph_core::overrides::Override;
-use sph_core::study::{run_study, Study};
+use sph_core::study::{run_study, Study, StudyOptions};
 use sph_core::StageRegistry;
 use std::path::PathBuf;
 
@@ -22,6 +22,10 @@ pub struct StudyArgs {
     /// Threads per case [default: the cores left per worker, at least 1].
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Run nothing: write study.csv, report.md and the figures from the cases that
+    /// have finished (the others are rows `not run`), e.g. while a long study runs.
+    #[arg(long)]
+    pub report_only: bool,
 }
 
 /// Runs the study and prints one line per case and where the results are.
@@ -53,9 +57,12 @@ pub fn main(args: &StudyArgs, registry: &StageRegistry) -> Result<(), String> {
         out.display()
     );
     let start = std::time::Instant::now();
-    let rows = run_study(&study, registry, &out, workers, threads, &|line| {
-        println!("{line}")
-    })?;
+    let opts = StudyOptions {
+        workers,
+        threads,
+        report_only: args.report_only,
+    };
+    let rows = run_study(&study, registry, &out, opts, &|line| println!("{line}"))?;
     let completed = rows.iter().filter(|r| r.completed()).count();
     println!(
         "study {}: {completed} of {} cases completed, {:.1} s wall; study.csv and report.md in {}",

@@ -249,6 +249,27 @@ impl Row {
     pub fn completed(&self) -> bool {
         self.status == "completed"
     }
+    /// The row's cells in [`header`] order, numbers written by `number`.
+    pub fn cells(&self, number: impl Fn(f64) -> String) -> Vec<String> {
+        let mut cells = vec![self.case.name.clone()];
+        cells.extend(self.case.labels.iter().cloned());
+        cells.push(self.status.clone());
+        let numbers = [
+            self.fluid_particles,
+            self.steps,
+            self.simulated_time,
+            self.wall_seconds,
+            self.particle_steps_per_second,
+        ];
+        cells.extend(
+            numbers
+                .into_iter()
+                .chain(self.metrics.iter().map(|m| m.1))
+                .map(number),
+        );
+        cells
+    }
+
     pub fn metric(&self, name: &str) -> Option<f64> {
         self.metrics.iter().find(|m| m.0 == name).map(|m| m.1)
     }
@@ -484,16 +505,31 @@ fn run_case(
     }
 }
 
+/// How [`run_study`] runs the cases.
+#[derive(Clone, Copy, Debug)]
+pub struct StudyOptions {
+    /// Cases run at the same time.
+    pub workers: usize,
+    /// Threads per case.
+    pub threads: usize,
+    /// Run nothing: report the cases that have finished, the others as `not run`.
+    pub report_only: bool,
+}
+
 /// Runs (or resumes) every case, `workers` at a time on `threads` threads each, then
 /// writes study.csv, the figures and report.md into `out_dir`. Returns the rows.
 pub fn run_study(
     study: &Study,
     registry: &StageRegistry,
     out_dir: &Path,
-    workers: usize,
-    threads: usize,
+    opts: StudyOptions,
     report: &(dyn Fn(&str) + Sync),
 ) -> Result<Vec<Row>, String> {
+    let StudyOptions {
+        workers,
+        threads,
+        report_only,
+    } = opts;
     std::fs::create_dir_all(out_dir).map_err(|e| format!("{}: {e}", out_dir.display()))?;
     let n = study.cases.len();
     let outcomes = crate::parallel::run_parallel(&study.cases, workers, |i, case| {
@@ -505,6 +541,9 @@ pub fn run_study(
                 case.name
             ));
             return (false, Ok(()));
+        }
+        if report_only {
+            return (false, Err("not run".to_string()));
         }
         let r = run_case(study, case, &dir, threads, registry);
         (true, r)
@@ -807,21 +846,7 @@ fn write_csv(path: &Path, study: &Study, rows: &[Row]) -> Result<(), String> {
     let err = |e: csv::Error| format!("{}: {e}", path.display());
     w.write_record(header(study, rows)).map_err(err)?;
     for r in rows {
-        let mut rec = vec![r.case.name.clone()];
-        rec.extend(r.case.labels.iter().cloned());
-        rec.push(r.status.clone());
-        rec.extend(
-            [
-                r.fluid_particles,
-                r.steps,
-                r.simulated_time,
-                r.wall_seconds,
-                r.particle_steps_per_second,
-            ]
-            .iter()
-            .chain(r.metrics.iter().map(|m| &m.1))
-            .map(|v| v.to_string()),
-        );
+        let rec = r.cells(|v| v.to_string());
         w.write_record(rec).map_err(err)?;
     }
     let bytes = w
@@ -882,21 +907,7 @@ fn write_report(
     let _ = writeln!(md, "| {} |", head.join(" | "));
     let _ = writeln!(md, "|{}", "---|".repeat(head.len()));
     for r in rows {
-        let mut cells = vec![r.case.name.clone()];
-        cells.extend(r.case.labels.iter().cloned());
-        cells.push(r.status.clone());
-        cells.extend(
-            [
-                r.fluid_particles,
-                r.steps,
-                r.simulated_time,
-                r.wall_seconds,
-                r.particle_steps_per_second,
-            ]
-            .iter()
-            .chain(r.metrics.iter().map(|m| &m.1))
-            .map(|v| short(*v)),
-        );
+        let cells = r.cells(short);
         let _ = writeln!(md, "| {} |", cells.join(" | "));
     }
     md.push_str("\nMetric definitions: docs/studies.md.\n");
