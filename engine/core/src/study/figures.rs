@@ -58,6 +58,10 @@ pub fn draw(
             } else {
                 points
             };
+            let points = match o.y_limits {
+                Some((lo, hi)) => points.iter().map(|&(t, v)| (t, v.clamp(lo, hi))).collect(),
+                None => points,
+            };
             series.push(Series {
                 name: if r.completed() {
                     r.case.name.clone()
@@ -130,4 +134,38 @@ fn speed_vs_error(path: &Path, title: &str, rows: &[Row], metric: &str) -> Resul
         &series,
     )
     .map_err(|e| e.to_string())
+}
+
+/// The cases' snapshot pictures at one time in one PNG, two per row, each under its
+/// case name (free surfaces side by side, e.g. per kernel). Cases without the picture
+/// (stopped before that time) are left out; returns false if none had it.
+pub fn snapshot_grid(path: &Path, panels: &[(String, std::path::PathBuf)]) -> Result<bool, String> {
+    use plotters::prelude::*;
+    let images: Vec<(&String, image::RgbImage)> = panels
+        .iter()
+        .filter_map(|(name, p)| Some((name, image::open(p).ok()?.to_rgb8())))
+        .collect();
+    if images.is_empty() {
+        return Ok(false);
+    }
+    let (w, h) = images.iter().fold((0, 0), |(w, h), (_, im)| {
+        (w.max(im.width()), h.max(im.height()))
+    });
+    let label = 36;
+    let cols = images.len().min(2) as u32;
+    let rows = (images.len() as u32).div_ceil(cols);
+    crate::output::plot::render_png(path, (cols * w, rows * (h + label)), |root| {
+        let style = TextStyle::from((crate::output::plot::FONT_FAMILY, 26).into_font());
+        for (k, (name, im)) in images.iter().enumerate() {
+            let (x0, y0) = ((k as u32 % cols) * w, (k as u32 / cols) * (h + label));
+            root.draw_text(name, &style, (x0 as i32 + 12, y0 as i32 + 6))?;
+            for (x, y, p) in im.enumerate_pixels() {
+                let at = ((x0 + x) as i32, (y0 + label + y) as i32);
+                root.draw_pixel(at, &RGBColor(p[0], p[1], p[2]))?;
+            }
+        }
+        Ok(())
+    })
+    .map_err(|e| e.to_string())?;
+    Ok(true)
 }

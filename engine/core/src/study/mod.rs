@@ -129,13 +129,16 @@ pub enum Metric {
     },
     /// A wall pressure against Buchner-style data in t* = t sqrt(g/H), p* = p/(rho_0 g H)
     /// (H the fluid height), window [from, to] in t*: `<c>_rms_error` (RMS of p*
-    /// differences), `<c>_peak`, `<c>_peak_time`, `<c>_peak_error` (relative) and
-    /// `<c>_peak_time_error` (t* difference).
+    /// differences), and in the window `peak` (default: the same) `<c>_peak`,
+    /// `<c>_peak_time`, `<c>_peak_error` (relative to the data's largest value there)
+    /// and `<c>_peak_time_error` (t* difference).
     Pressure {
         column: String,
         reference: String,
         from: f64,
         to: f64,
+        #[serde(default)]
+        peak: Option<(f64, f64)>,
     },
     /// A wave gauge [m] against data (t [s], eta [m]): `<c>_rms_error` over [from, to] s.
     WaveGauge {
@@ -210,6 +213,10 @@ pub struct Overlay {
     /// Reference data drawn as points (same units as the figure).
     #[serde(default)]
     pub reference: Option<String>,
+    /// Vertical axis limits (lo, hi) in the figure's units; values beyond are drawn at
+    /// the limit (e.g. to see the pressure around an impact spike). Default: all data.
+    #[serde(default)]
+    pub y_limits: Option<(f64, f64)>,
 }
 
 /// One case: its folder name, parameter labels and overrides.
@@ -699,15 +706,17 @@ fn metric_values(
             reference: r,
             from,
             to,
+            peak,
         } => {
+            let (p0, p1) = peak.unwrap_or((*from, *to));
             let t_scale = (g / height).sqrt();
             let sim: Vec<(f64, f64)> = probes(column)
                 .iter()
                 .map(|&(t, p)| (t * t_scale, p / p_scale))
                 .collect();
             let data = reference(&study.resolve(r));
-            let (ts, ps) = metrics::peak(&sim, *from, *to);
-            let (tr, pr) = metrics::peak(&data, *from, *to);
+            let (ts, ps) = metrics::peak(&sim, p0, p1);
+            let (tr, pr) = metrics::peak(&data, p0, p1);
             let b = base(column);
             vec![
                 (
@@ -915,28 +924,22 @@ fn write_report(
         let _ = writeln!(md, "\n## {title}\n\n![{title}]({file})");
     }
     for t in &s.snapshots {
-        let _ = writeln!(md, "\n## Free surface at t = {t} s\n");
-        let _ = writeln!(
-            md,
-            "| {} |",
-            rows.iter()
-                .map(|r| r.case.name.as_str())
-                .collect::<Vec<_>>()
-                .join(" | ")
-        );
-        let _ = writeln!(md, "|{}", "---|".repeat(rows.len()));
-        let cells: Vec<String> = rows
+        let panels: Vec<(String, PathBuf)> = rows
             .iter()
             .map(|r| {
-                let f = format!("{}/snapshot_t{t:.3}.png", r.case.name);
-                if out_dir.join(&f).is_file() {
-                    format!("![{}]({f})", r.case.name)
-                } else {
-                    "(not reached)".into()
-                }
+                let file = out_dir
+                    .join(&r.case.name)
+                    .join(format!("snapshot_t{t:.3}.png"));
+                (r.case.name.clone(), file)
             })
             .collect();
-        let _ = writeln!(md, "| {} |", cells.join(" | "));
+        let file = format!("snapshots_t{t:.3}.png");
+        if figures::snapshot_grid(&out_dir.join(&file), &panels)? {
+            let _ = writeln!(
+                md,
+                "\n## Free surface at t = {t} s, per case\n\n![snapshots at t = {t} s]({file})"
+            );
+        }
     }
     let path = out_dir.join("report.md");
     crate::output::atomic::write_atomic(&path, md.as_bytes())
