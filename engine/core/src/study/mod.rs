@@ -139,6 +139,9 @@ pub enum Metric {
         to: f64,
         #[serde(default)]
         peak: Option<(f64, f64)>,
+        /// Prefix of the columns instead of `<c>`, to compare one sensor twice.
+        #[serde(default)]
+        name: Option<String>,
     },
     /// A wave gauge [m] against data (t [s], eta [m]): `<c>_rms_error` over [from, to] s.
     WaveGauge {
@@ -707,6 +710,7 @@ fn metric_values(
             from,
             to,
             peak,
+            name,
         } => {
             let (p0, p1) = peak.unwrap_or((*from, *to));
             let t_scale = (g / height).sqrt();
@@ -717,7 +721,7 @@ fn metric_values(
             let data = reference(&study.resolve(r));
             let (ts, ps) = metrics::peak(&sim, p0, p1);
             let (tr, pr) = metrics::peak(&data, p0, p1);
-            let b = base(column);
+            let b = name.as_deref().unwrap_or(base(column));
             vec![
                 (
                     format!("{b}_rms_error"),
