@@ -949,3 +949,58 @@ fn write_report(
     crate::output::atomic::write_atomic(&path, md.as_bytes())
         .map_err(|e| format!("{}: {e}", path.display()))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec(design: &str, linked: &str) -> StudySpec {
+        parse_ron(
+            &format!(
+                r#"Study(name: "s", scenario: "x.ron", design: {design}, set: ["end_time=1.0"],
+                    parameters: [
+                        (name: "c0", path: "fluid.sound_speed", values: ["12.0", "25.0", "50.0"]),
+                        (name: "k", path: "kernel", values: ["Cubic", "Gaussian"], labels: ["cubic", "gauss"],
+                         linked: [(path: "h_over_dx", values: [{linked}])]),
+                    ])"#
+            ),
+            "s.ron",
+        )
+        .unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    #[test]
+    fn one_at_a_time_varies_each_parameter_from_the_base_case() {
+        let cases = cases(&spec("OneAtATime", r#""1.3", "0.9""#), "s.ron", &[]).unwrap();
+        let names: Vec<&str> = cases.iter().map(|c| c.name.as_str()).collect();
+        assert_eq!(
+            names,
+            [
+                "c0_12.0__k_cubic",
+                "c0_25.0__k_cubic",
+                "c0_50.0__k_cubic",
+                "c0_12.0__k_gauss"
+            ]
+        );
+        let raw: Vec<&str> = cases[3].overrides.iter().map(|o| o.raw.as_str()).collect();
+        assert_eq!(
+            raw,
+            [
+                "end_time=1.0",
+                "fluid.sound_speed=12.0",
+                "kernel=Gaussian",
+                "h_over_dx=0.9"
+            ]
+        );
+    }
+
+    #[test]
+    fn grid_takes_every_combination_and_linked_values_must_match() {
+        let cases = cases(&spec("Grid", r#""1.3", "0.9""#), "s.ron", &[]).unwrap();
+        assert_eq!(cases.len(), 6);
+        assert_eq!(cases[5].name, "c0_50.0__k_gauss");
+        let e = super::cases(&spec("Grid", r#""1.3""#), "s.ron", &[]).unwrap_err();
+        assert_eq!(e.field.as_deref(), Some("linked"));
+        assert!(e.to_string().contains("has 1 values for 2"), "{e}");
+    }
+}
