@@ -174,6 +174,10 @@ pub enum Metric {
     EnergyLoss { times: Vec<f64> },
     /// The largest |rho/rho_0 - 1| over the run (probes.csv `max_density_fluctuation`).
     DensityFluctuation,
+    /// The same over [from, to] s only: `max_density_fluctuation_t<from>-<to>` (e.g.
+    /// before the first impact, where it measures the bulk's compressibility rather
+    /// than a single splash particle).
+    DensityFluctuationWindow { from: f64, to: f64 },
     /// Fluid particles at the end with fewer than `min_neighbours` others within
     /// `radius` ds ([`metrics::spattered`]): `spattered`.
     Spatter {
@@ -779,6 +783,14 @@ fn metric_values(
             "max_density_fluctuation".into(),
             probes("max_density_fluctuation")
                 .iter()
+                .map(|p| p.1)
+                .fold(f64::NAN, f64::max),
+        )],
+        Metric::DensityFluctuationWindow { from, to } => vec![(
+            format!("max_density_fluctuation_t{from}-{to}"),
+            probes("max_density_fluctuation")
+                .iter()
+                .filter(|p| p.0 >= *from && p.0 <= *to)
                 .map(|p| p.1)
                 .fold(f64::NAN, f64::max),
         )],
