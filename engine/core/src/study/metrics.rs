@@ -68,6 +68,20 @@ pub fn peak(series: &[(f64, f64)], from: f64, to: f64) -> (f64, f64) {
         })
 }
 
+/// The largest (`largest`) or smallest sample in [from, to]; NaN if none. The density
+/// fluctuation and neighbour-count metrics are extremes of their probe columns.
+pub fn extreme(series: &[(f64, f64)], from: f64, to: f64, largest: bool) -> f64 {
+    let inside = series
+        .iter()
+        .filter(|p| p.0 >= from && p.0 <= to)
+        .map(|p| p.1);
+    if largest {
+        inside.fold(f64::NAN, f64::max)
+    } else {
+        inside.fold(f64::NAN, f64::min)
+    }
+}
+
 /// Total variation TV = sum_k |y_{k+1} - y_k| over the samples in [from, to]: a
 /// measure of a signal's roughness (a monotone signal's TV is its net change; noise
 /// adds twice its amplitude per oscillation). NaN with fewer than two samples.
@@ -239,6 +253,15 @@ mod tests {
         assert!((t - 2.0).abs() < 1e-9 && (v - 1.0).abs() < 1e-6);
         let (t, v) = peak(&s, 0.0, 10.0);
         assert!((t - 8.0).abs() < 1e-9 && (v - 3.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn extremes_of_a_window() {
+        let s = sampled(|t| (t - 1.0) * (t - 1.0), 3.0, 300);
+        assert!((extreme(&s, 0.0, 3.0, true) - 4.0).abs() < 1e-12);
+        assert!(extreme(&s, 0.0, 3.0, false).abs() < 1e-12);
+        assert!((extreme(&s, 2.0, 2.5, false) - 1.0).abs() < 1e-12);
+        assert!(extreme(&s, 5.0, 6.0, true).is_nan());
     }
 
     #[test]

@@ -781,18 +781,11 @@ fn metric_values(
         }
         Metric::DensityFluctuation => vec![(
             "max_density_fluctuation".into(),
-            probes("max_density_fluctuation")
-                .iter()
-                .map(|p| p.1)
-                .fold(f64::NAN, f64::max),
+            metrics::extreme(&probes("max_density_fluctuation"), 0.0, f64::INFINITY, true),
         )],
         Metric::DensityFluctuationWindow { from, to } => vec![(
             format!("max_density_fluctuation_t{from}-{to}"),
-            probes("max_density_fluctuation")
-                .iter()
-                .filter(|p| p.0 >= *from && p.0 <= *to)
-                .map(|p| p.1)
-                .fold(f64::NAN, f64::max),
+            metrics::extreme(&probes("max_density_fluctuation"), *from, *to, true),
         )],
         Metric::Spatter {
             radius,
@@ -811,17 +804,11 @@ fn metric_values(
         Metric::NeighbourRange => vec![
             (
                 "neighbours_min".into(),
-                probes("neighbours_min")
-                    .iter()
-                    .map(|p| p.1)
-                    .fold(f64::NAN, f64::min),
+                metrics::extreme(&probes("neighbours_min"), 0.0, f64::INFINITY, false),
             ),
             (
                 "neighbours_max".into(),
-                probes("neighbours_max")
-                    .iter()
-                    .map(|p| p.1)
-                    .fold(f64::NAN, f64::max),
+                metrics::extreme(&probes("neighbours_max"), 0.0, f64::INFINITY, true),
             ),
         ],
         Metric::Lost => {
