@@ -94,17 +94,20 @@ pub fn main_with(registry: StageRegistry) -> ExitCode {
     }
 }
 
+/// The `--set PATH=VALUE` arguments as overrides.
+pub fn parse_sets(sets: &[String]) -> Result<Vec<Override>, String> {
+    sets.iter()
+        .map(|s| s.parse::<Override>().map_err(|e| e.to_string()))
+        .collect()
+}
+
 /// Loads and runs one scenario, printing the headline figures.
 pub fn run_scenario(args: &RunArgs, registry: &StageRegistry) -> Result<(), String> {
     let path = args
         .scenario
         .as_ref()
         .ok_or("give a scenario file, e.g. `engine scenarios/dam_break.ron`")?;
-    let overrides = args
-        .sets
-        .iter()
-        .map(|s| s.parse::<Override>().map_err(|e| e.to_string()))
-        .collect::<Result<Vec<_>, _>>()?;
+    let overrides = parse_sets(&args.sets)?;
     if args.threads == Some(0) {
         return Err("--threads must be at least 1".into());
     }

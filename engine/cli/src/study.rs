@@ -1,7 +1,6 @@
 //! `engine study FILE`: runs (or resumes) a sensitivity study and writes study.csv,
 //! report.md and the figures (see `sph_core::study`).
 
-use sph_core::overrides::Override;
 use sph_core::study::{run_study, Study, StudyOptions};
 use sph_core::StageRegistry;
 use std::path::PathBuf;
@@ -30,11 +29,7 @@ pub struct StudyArgs {
 
 /// Runs the study and prints one line per case and where the results are.
 pub fn main(args: &StudyArgs, registry: &StageRegistry) -> Result<(), String> {
-    let overrides = args
-        .sets
-        .iter()
-        .map(|s| s.parse::<Override>().map_err(|e| e.to_string()))
-        .collect::<Result<Vec<_>, _>>()?;
+    let overrides = crate::parse_sets(&args.sets)?;
     let study = Study::load(&args.study, &overrides, registry).map_err(|e| e.to_string())?;
     if args.workers == Some(0) || args.threads == Some(0) {
         return Err("--workers and --threads must be at least 1".into());
