@@ -11,6 +11,12 @@ fn study_file() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/study_small.ron")
 }
 
+/// Width of a PNG from its header.
+fn image_width(path: &Path) -> u32 {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    u32::from_be_bytes([bytes[16], bytes[17], bytes[18], bytes[19]])
+}
+
 fn load(sets: &[&str]) -> Study {
     let overrides: Vec<Override> = sets.iter().map(|s| s.parse().unwrap()).collect();
     Study::load(&study_file(), &overrides, &sph_stages::standard_registry())
@@ -95,7 +101,13 @@ fn small_study_writes_rows_metrics_figures_and_resumes() {
         assert!(out.join(figure).is_file(), "{figure}");
         assert!(report.contains(figure));
     }
-    assert!(report.contains("c0_40.0/snapshot_t0.500.png"));
+    // Both cases' snapshots side by side in one picture: two panels wide.
+    assert!(report.contains("snapshots_t0.500.png"));
+    let grid = image_width(&out.join("snapshots_t0.500.png"));
+    assert_eq!(
+        grid,
+        2 * image_width(&out.join("c0_40.0/snapshot_t0.500.png"))
+    );
 
     // Resume: nothing runs again, the same rows come back.
     let summary = out.join("c0_20.0/summary.json");
