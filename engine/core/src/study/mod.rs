@@ -582,7 +582,7 @@ pub fn run_study(
     }
     write_csv(&out_dir.join("study.csv"), study, &rows)?;
     let figures = figures::draw(study, out_dir, &rows, registry)?;
-    write_report(study, out_dir, &rows, &figures, workers, threads)?;
+    write_report(study, out_dir, &rows, &figures, opts)?;
     Ok(rows)
 }
 
@@ -887,10 +887,12 @@ fn write_report(
     out_dir: &Path,
     rows: &[Row],
     figures: &[(String, String)],
-    workers: usize,
-    threads: usize,
+    opts: StudyOptions,
 ) -> Result<(), String> {
     let s = &study.spec;
+    let StudyOptions {
+        workers, threads, ..
+    } = opts;
     let mut md = format!("# Study `{}`\n\n", s.name);
     let _ = writeln!(
         md,
@@ -907,11 +909,18 @@ fn write_report(
             format!("`{}`", s.set.join("`, `"))
         }
     );
+    let ran = rows.iter().filter(|r| r.ran).count();
     let _ = writeln!(
         md,
-        "Cases ran {workers} at a time on {threads} thread(s) each: independent cases need no \
-         synchronisation, while splitting one small case over threads pays a fork-join per \
-         stage and step. Wall seconds and particle-steps per second are per case.\n"
+        "{ran} case(s) ran now, {workers} at a time on {threads} thread(s) each (independent \
+         cases need no synchronisation, while splitting one small case over threads pays a \
+         fork-join per stage and step); the others were finished earlier{}. Wall seconds and \
+         particle-steps per second are per case, as measured when it ran.\n",
+        if opts.report_only {
+            " or not run (--report-only)"
+        } else {
+            ""
+        }
     );
     let completed = rows.iter().filter(|r| r.completed()).count();
     let _ = writeln!(md, "{completed} of {} cases completed.\n", rows.len());
