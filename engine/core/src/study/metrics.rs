@@ -152,7 +152,7 @@ pub fn energy_loss(energy: &[(f64, f64)], t: f64) -> f64 {
 /// Spattered particles: fluid particles with fewer than `min_neighbours` other fluid
 /// particles within `radius` of them — isolated drops or pairs thrown off the bulk,
 /// whose own kernel sums are meaningless. (With radius 2 ds a particle inside the bulk
-/// has about 12 such neighbours, one on a flat free surface about 7, so the count
+/// has about 12 such neighbours, one on a flat free surface about 8, so the count
 /// excludes the surface itself.)
 pub fn spattered(positions: &[DVec2], radius: f64, min_neighbours: usize) -> usize {
     let cell = |p: DVec2| ((p.x / radius).floor() as i64, (p.y / radius).floor() as i64);
