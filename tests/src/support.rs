@@ -88,13 +88,4 @@ pub fn reference(file: &str) -> Vec<(f64, f64)> {
 }
 
 /// Linear interpolation of a time series at `t` (clamped at the ends).
-pub fn interpolate(series: &[(f64, f64)], t: f64) -> f64 {
-    match series.iter().position(|p| p.0 >= t) {
-        Some(0) => series[0].1,
-        Some(k) => {
-            let (a, b) = (series[k - 1], series[k]);
-            a.1 + (b.1 - a.1) * (t - a.0) / (b.0 - a.0)
-        }
-        None => series.last().map_or(f64::NAN, |p| p.1),
-    }
-}
+pub use sph_core::study::metrics::interpolate;

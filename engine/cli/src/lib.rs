@@ -2,6 +2,7 @@
 //! `engine::main_with(registry)` after registering its stages.
 
 pub mod bench;
+pub mod study;
 
 use clap::{Parser, Subcommand};
 use sph_core::checkpoint::Origin;
@@ -33,6 +34,8 @@ pub enum Command {
     Stages,
     /// Benchmark the dam break over sizes and thread counts (bench.csv, bench.md).
     Bench(bench::BenchArgs),
+    /// Run a sensitivity study (scenarios/studies/*.ron): study.csv, report.md, figures.
+    Study(study::StudyArgs),
     /// Continue a run from the newest checkpoint in its output folder.
     Resume(ResumeArgs),
 }
@@ -119,6 +122,13 @@ pub fn main_with(registry: StageRegistry) -> ExitCode {
                 ExitCode::FAILURE
             }
         },
+        Some(Command::Study(args)) => match study::main(&args, &registry) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(message) => {
+                eprintln!("error: {message}");
+                ExitCode::FAILURE
+            }
+        },
         None => match run_scenario(&cli.run, &registry) {
             Ok(code) => code,
             Err(message) => {
@@ -158,8 +168,8 @@ fn interrupt_flag() -> Option<Arc<AtomicBool>> {
     .clone()
 }
 
-/// Parses `--set` strings.
-fn parse_overrides(sets: &[String]) -> Result<Vec<Override>, String> {
+/// The `--set PATH=VALUE` arguments as overrides.
+pub fn parse_sets(sets: &[String]) -> Result<Vec<Override>, String> {
     sets.iter()
         .map(|s| s.parse::<Override>().map_err(|e| e.to_string()))
         .collect()
@@ -181,7 +191,7 @@ pub fn resume(args: &ResumeArgs, registry: &StageRegistry) -> Result<ExitCode, S
             checkpoint.file.display()
         ));
     }
-    let overrides = parse_overrides(&origin.sets)?;
+    let overrides = parse_sets(&origin.sets)?;
     let scenario = Scenario::load(&origin.scenario, &overrides, registry)
         .map_err(|e| format!("{e}\n(the scenario the checkpoint was written for)"))?;
     eprintln!(
@@ -211,7 +221,7 @@ pub fn run_scenario(args: &RunArgs, registry: &StageRegistry) -> Result<ExitCode
         .scenario
         .as_ref()
         .ok_or("give a scenario file, e.g. `engine scenarios/dam_break.ron`")?;
-    let overrides = parse_overrides(&args.sets)?;
+    let overrides = parse_sets(&args.sets)?;
     if args.threads == Some(0) {
         return Err("--threads must be at least 1".into());
     }

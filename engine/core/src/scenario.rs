@@ -464,6 +464,33 @@ pub struct Scenario {
     pub source: PathBuf,
 }
 
+/// A RON parse error as a [`LoadError`]: `file:line:column`, the field it is about.
+fn parse_error(doc: &Doc, file: &str, e: &ron::error::SpannedError) -> LoadError {
+    let (line, column) = (e.span.start.line, e.span.start.col);
+    let message = e.code.to_string();
+    let (field, message) = if matches!(e.code, ron::Error::Eof) {
+        // Input ended early: about the unclosed whole, not the last field.
+        (None, message)
+    } else {
+        name_field(doc, line, column, message)
+    };
+    LoadError {
+        file: file.to_string(),
+        line,
+        column,
+        field,
+        message,
+    }
+}
+
+/// Parses RON `text` (any file of the project's formats, e.g. a study) with the
+/// scenario loader's options and error reporting.
+pub fn parse_ron<T: serde::de::DeserializeOwned>(text: &str, file: &str) -> Result<T, LoadError> {
+    ron_options()
+        .from_str(text)
+        .map_err(|e| parse_error(&Doc::new(text), file, &e))
+}
+
 /// RON options: `IMPLICIT_SOME` lets optional fields be written without `Some(..)`.
 fn ron_options() -> ron::Options {
     ron::Options::default().with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME)
@@ -505,23 +532,7 @@ impl Scenario {
         let parsed: Result<ScenarioSpec, _> = ron_options().from_str(&text);
         REGISTRY.with(|r| *r.borrow_mut() = None);
         let doc = Doc::new(&text);
-        let spec = parsed.map_err(|e| {
-            let (line, column) = (e.span.start.line, e.span.start.col);
-            let message = e.code.to_string();
-            let (field, message) = if matches!(e.code, ron::Error::Eof) {
-                // Input ended early: about the unclosed whole, not the last field.
-                (None, message)
-            } else {
-                name_field(&doc, line, column, message)
-            };
-            LoadError {
-                file: file.to_string(),
-                line,
-                column,
-                field,
-                message,
-            }
-        })?;
+        let spec = parsed.map_err(|e| parse_error(&doc, file, &e))?;
         let at = Locator { file, doc: &doc };
         validate(spec, &at, PathBuf::from(file))
     }

@@ -29,8 +29,6 @@ use crate::{Scenario, StageRegistry};
 use std::f64::consts::PI;
 use std::fmt::Write as _;
 use std::path::Path;
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
 
 /// One case of a sweep.
 #[derive(Clone, Debug)]
@@ -146,35 +144,6 @@ pub fn fit_harmonic(t: &[f64], y: &[f64], omega: f64) -> Option<(f64, f64)> {
     Some((a.hypot(b), b.atan2(a)))
 }
 
-/// Column `name` of a CSV with a `time` first column, from `from` on; the error for a
-/// missing column names the probe option that writes it (`needs`).
-pub(crate) fn read_column(
-    path: &Path,
-    name: &str,
-    from: f64,
-    needs: &str,
-) -> Result<(Vec<f64>, Vec<f64>), String> {
-    let mut reader =
-        csv::Reader::from_path(path).map_err(|e| format!("{}: {e}", path.display()))?;
-    let headers = reader.headers().map_err(|e| e.to_string())?.clone();
-    let k = headers
-        .iter()
-        .position(|h| h == name)
-        .ok_or_else(|| format!("{}: no column `{name}`; add {needs}", path.display()))?;
-    let (mut t, mut y) = (Vec::new(), Vec::new());
-    for row in reader.records() {
-        let row = row.map_err(|e| format!("{}: {e}", path.display()))?;
-        let parse = |i: usize| row.get(i).and_then(|v| v.parse::<f64>().ok());
-        if let (Some(ti), Some(yi)) = (parse(0), parse(k)) {
-            if ti >= from {
-                t.push(ti);
-                y.push(yi);
-            }
-        }
-    }
-    Ok((t, y))
-}
-
 /// Runs every case (`workers` at a time, one thread each) and writes response.csv and
 /// response.png into `out_dir`. `overrides` (from the command line) apply to every case.
 pub fn run_sweep(
@@ -188,36 +157,27 @@ pub fn run_sweep(
     let base = Scenario::load(path, overrides, registry).map_err(|e| e.to_string())?;
     let cases = cases(&base)?;
     std::fs::create_dir_all(out_dir).map_err(|e| format!("{}: {e}", out_dir.display()))?;
-    let next = AtomicUsize::new(0);
-    let results: Mutex<Vec<Option<Result<Response, String>>>> = Mutex::new(vec![None; cases.len()]);
-    std::thread::scope(|s| {
-        for _ in 0..workers.clamp(1, cases.len().max(1)) {
-            s.spawn(|| loop {
-                let i = next.fetch_add(1, Ordering::SeqCst);
-                let Some(case) = cases.get(i) else { break };
-                let r = run_case(path, overrides, registry, out_dir, case);
-                match &r {
-                    Ok(r) => report(&format!(
-                        "case {}/{} {}: amplitude {:.4} N m, phase {:.1} deg (linear theory {:.4} N m, {:.1} deg), {:.1} s wall",
-                        i + 1,
-                        cases.len(),
-                        case.name,
-                        r.amplitude,
-                        r.phase_deg,
-                        r.linear_amplitude,
-                        r.linear_phase_deg,
-                        r.summary.wall_seconds
-                    )),
-                    Err(e) => report(&format!("case {}/{} {}: {e}", i + 1, cases.len(), case.name)),
-                }
-                results.lock().unwrap_or_else(|p| p.into_inner())[i] = Some(r);
-            });
+    let results = crate::parallel::run_parallel(&cases, workers, |i, case| {
+        let r = run_case(path, overrides, registry, out_dir, case);
+        match &r {
+            Ok(r) => report(&format!(
+                "case {}/{} {}: amplitude {:.4} N m, phase {:.1} deg (linear theory {:.4} N m, {:.1} deg), {:.1} s wall",
+                i + 1,
+                cases.len(),
+                case.name,
+                r.amplitude,
+                r.phase_deg,
+                r.linear_amplitude,
+                r.linear_phase_deg,
+                r.summary.wall_seconds
+            )),
+            Err(e) => report(&format!("case {}/{} {}: {e}", i + 1, cases.len(), case.name)),
         }
+        r
     });
-    let results = results.into_inner().unwrap_or_else(|p| p.into_inner());
     let mut responses = Vec::new();
     let mut failures = Vec::new();
-    for r in results.into_iter().flatten() {
+    for r in results {
         match r {
             Ok(r) => responses.push(r),
             Err(e) => failures.push(e),
@@ -271,12 +231,11 @@ fn run_case(
         }
         Err(e) => return Err(e.to_string()),
     };
-    let (t, m) = read_column(
-        &dir.join("probes.csv"),
-        "roll_moment",
-        0.0,
-        "Probe(roll_moment: true)",
-    )?;
+    let (t, m): (Vec<f64>, Vec<f64>) =
+        crate::series::read_series(&dir.join("probes.csv"), "roll_moment")
+            .map_err(|e| format!("{e}; add Probe(roll_moment: true)"))?
+            .into_iter()
+            .unzip();
     let theory = linear.roll_moment_history(
         axis_height,
         |s| {

@@ -6,7 +6,8 @@
 
 use crate::piston::{biesel_height_over_stroke, wavenumber};
 use crate::scenario::Scenario;
-use crate::sweep::{fit_harmonic, read_column};
+use crate::series::read_series;
+use crate::sweep::fit_harmonic;
 use std::f64::consts::PI;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -273,7 +274,11 @@ impl WaveTheory {
         let mut heights = Vec::new();
         let mut harmonics = Vec::new();
         for (name, x) in &self.gauges {
-            let (t, eta) = read_column(probes, name, t0, "wave_gauges and a Probe()")?;
+            let (t, eta): (Vec<f64>, Vec<f64>) = read_series(probes, name)
+                .map_err(|e| format!("{e}; wave gauges need `wave_gauges` and a Probe()"))?
+                .into_iter()
+                .filter(|(t, _)| *t >= t0)
+                .unzip();
             let (amplitude, phase) = harmonic(&t, &eta, self.omega, t0, t1).ok_or_else(|| {
                 format!(
                     "{}: too few samples of {name} in {t0}..{t1} s",
