@@ -250,6 +250,17 @@ impl Stability {
         }
     }
 
+    /// Asserts either of the acceptable ends: finished within `bounds` (as
+    /// [`Stability::assert_finished_within`]), or stopped with a located diagnostic.
+    pub fn assert_finished_within_or_stopped(&self, case: &str, bounds: &Bounds) {
+        match self.outcome {
+            Outcome::Stopped(_) => {
+                self.assert_stopped_with_diagnostic(case);
+            }
+            _ => self.assert_finished_within(case, bounds),
+        }
+    }
+
     /// Asserts the run stopped with the foundation issue's diagnostic: it names when
     /// (step and time) and where (particle and position, or wall) it stopped.
     pub fn assert_stopped_with_diagnostic(&self, case: &str) -> &str {

