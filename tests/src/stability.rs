@@ -275,6 +275,7 @@ impl Stability {
                 "diagnostic lacks `{part}`: {message}"
             );
         }
+        let _ = std::fs::remove_dir_all(&self.out);
         message
     }
 }
