@@ -223,6 +223,7 @@ impl Stage for Integrate {
         };
         let (lo, hi) = c.domain;
         let (rho0, limit) = (c.eos.rho0, self.params.density_limit);
+        let reach = c.support();
         // One pass: kick, drift, reflect at the walls (at their end-of-step place),
         // then check; it returns the reflections and the lowest offending index.
         let (reflected, bad) = (
@@ -247,14 +248,14 @@ impl Stage for Integrate {
                 x.0 += dt * vh.0;
                 v.0 = vh.0 + 0.5 * dt * a.0;
                 rho.0 = rh.0 + 0.5 * dt * r.0;
-                let hit = reflect && self.reflect(floor, x, v, vh, rho, rh);
+                let hit = reflect && self.reflect(floor, reach, x, v, vh, rho, rh);
                 let p = x.0;
                 let ok = p.is_finite()
                     && rho.0.is_finite()
                     && p.cmpge(lo).all()
                     && p.cmple(hi).all()
                     && (rho.0 / rho0 - 1.0).abs() <= limit
-                    && self.crossed_wall(p).is_none();
+                    && self.walls.crossed(p, reach).is_none();
                 (hit as usize, (!ok).then_some(i))
             })
             .reduce(
@@ -318,8 +319,8 @@ impl Integrate {
         let limit = self.params.density_limit;
         let what = if !p.is_finite() || !r.is_finite() {
             "non-finite position or density".to_string()
-        } else if let Some(w) = self.crossed_wall(p) {
-            format!("particle passed through wall `{w}`")
+        } else if let Some(w) = self.walls.crossed(p, sim.constants.support()) {
+            format!("particle passed through {}", self.walls.describe(w))
         } else if p.cmplt(lo).any() || p.cmpgt(hi).any() {
             "particle left the domain".to_string()
         } else {
@@ -329,13 +330,16 @@ impl Integrate {
     }
 
     /// Reflects a particle that ended the step behind a wall (position mirrored, normal
-    /// velocity relative to the wall reversed); returns whether it did. With
+    /// velocity relative to the wall reversed), or diagonally past a convex corner
+    /// within `reach` of it (mirrored across both walls); returns whether it did. With
     /// `restore_density_on_reflection`, `floor` (rho_0) is the reflected particle's
     /// least density; otherwise `floor` is 0 and densities are kept.
+    #[allow(clippy::too_many_arguments)]
     #[inline]
     fn reflect(
         &self,
         floor: f64,
+        reach: f64,
         x: &mut Position,
         v: &mut Velocity,
         vh: &mut HalfVelocity,
@@ -343,26 +347,32 @@ impl Integrate {
         rh: &mut HalfDensity,
     ) -> bool {
         let mut hit = false;
-        for (line, wall) in self.walls.lines().iter().zip(self.walls.now()) {
+        let (lines, walls) = (self.walls.lines(), self.walls.now());
+        let mut bounce = |k: usize, x: &mut Position| {
+            let (d, n) = (lines[k].distance(x.0), lines[k].normal);
+            let vw = walls[k].velocity_at(x.0 - d * n);
+            x.0 -= 2.0 * d * n;
+            v.0 -= 2.0 * (v.0 - vw).dot(n).min(0.0) * n;
+            vh.0 -= 2.0 * (vh.0 - vw).dot(n).min(0.0) * n;
+            hit = true;
+        };
+        for (k, line) in lines.iter().enumerate() {
             if line.behind(x.0) {
-                let (d, n) = (line.distance(x.0), line.normal);
-                let vw = wall.velocity_at(x.0 - d * n);
-                x.0 -= 2.0 * d * n;
-                v.0 -= 2.0 * (v.0 - vw).dot(n).min(0.0) * n;
-                vh.0 -= 2.0 * (vh.0 - vw).dot(n).min(0.0) * n;
-                rho.0 = rho.0.max(floor);
-                rh.0 = rh.0.max(floor);
-                hit = true;
+                bounce(k, x);
             }
         }
+        // Out through a corner: behind both lines but alongside neither wall.
+        for c in self.walls.corners() {
+            if self.walls.past_corner(c, x.0, reach) {
+                bounce(c.first, x);
+                bounce(c.second, x);
+            }
+        }
+        if hit {
+            rho.0 = rho.0.max(floor);
+            rh.0 = rh.0.max(floor);
+        }
         hit
-    }
-
-    /// The wall whose line the particle is behind while alongside the wall.
-    #[inline]
-    fn crossed_wall(&self, p: DVec2) -> Option<&str> {
-        let k = self.walls.lines().iter().position(|l| l.behind(p))?;
-        Some(self.walls.now()[k].name.as_str())
     }
 }
 

@@ -1,34 +1,74 @@
-//! A run's results do not depend on the number of worker threads: a small dam break
-//! and a small rolling tank, each on one thread and on two, write byte-identical
-//! probes.csv and energy.csv.
+//! A run's results do not depend on the number of worker threads, and a run repeated
+//! gives the same results: every shipped scenario (scenarios/*.ron), at a coarse
+//! resolution and for a fraction of a second, run on one thread, on two, and on two
+//! again, ends with bit-identical particles (positions, velocities, densities by
+//! particle id) and writes byte-identical probes.csv and energy.csv. A scenario file
+//! added to scenarios/ without an entry here fails `every_shipped_scenario_is_covered`.
 
-use sph_core::overrides::Override;
-use sph_core::runner::{run, RunOptions};
-use sph_core::Scenario;
-use sph_tests::support::temp_out;
-use std::path::PathBuf;
+use sph_core::components::{Density, ParticleId, Position, Velocity};
+use sph_core::runner::{run_keeping_state, RunOptions};
+use sph_core::world::Particles;
+use sph_tests::stability::quiet;
+use sph_tests::support::{load, temp_out};
+use std::path::{Path, PathBuf};
 
-const DAM: &str = include_str!("../../scenarios/dam_break.ron");
-const SLOSHING: &str = include_str!("../../scenarios/sloshing.ron");
+/// One test per shipped scenario: `name: "file.ron", [coarse overrides];`. Moving
+/// tanks and pistons get a short ramp so that they move within the run.
+macro_rules! shipped {
+    ($($test:ident: $file:literal, [$($o:literal),* $(,)?];)*) => {
+        /// The scenario files with an entry.
+        const COVERED: &[&str] = &[$($file),*];
+        $(
+            #[test]
+            fn $test() {
+                let text = include_str!(concat!("../../scenarios/", $file));
+                check_deterministic(text, concat!("scenarios/", $file), &[$($o),*]);
+            }
+        )*
+    };
+}
 
-/// Keep output cheap: one frame, no pictures or plots.
-const QUIET: [&str; 4] = [
-    "pipeline.vtk_frames.interval=1.0",
-    "pipeline.snapshots.times=[]",
-    "pipeline.probe.plots=false",
-    "pipeline.energy.plots=false",
-];
+shipped! {
+    anti_roll_tank_is_deterministic: "anti_roll_tank.ron",
+        ["resolution=Spacing(0.02)", "end_time=0.3", "tank.motion.ramp=0.1"];
+    dam_break_is_deterministic: "dam_break.ron",
+        ["resolution=ParticlesAcross(40)", "end_time=0.3"];
+    hydrostatic_is_deterministic: "hydrostatic.ron",
+        ["resolution=Spacing(0.05)", "end_time=0.3"];
+    sloshing_is_deterministic: "sloshing.ron",
+        ["resolution=ParticlesAcross(60)", "end_time=0.4", "tank.motion.ramp=0.1"];
+    sloshing_high_is_deterministic: "sloshing_high.ron",
+        ["resolution=ParticlesAcross(27)", "end_time=0.3", "tank.motion.ramp=0.1"];
+    wave_breaking_is_deterministic: "wave_breaking.ron",
+        ["resolution=Spacing(0.05)", "end_time=0.3", "piston.ramp=0.1"];
+    wave_maker_is_deterministic: "wave_maker.ron",
+        ["resolution=Spacing(0.05)", "end_time=0.3", "piston.ramp=0.1", "pipeline.energy.interval=0.01"];
+}
 
-/// Runs a small version of `text` on `threads` threads; returns the output folder.
-fn run_on(text: &str, file: &str, coarse: &[&str], threads: usize) -> PathBuf {
-    let overrides: Vec<Override> = coarse
-        .iter()
-        .chain(&QUIET)
-        .map(|o| o.parse().unwrap_or_else(|e| panic!("{e}")))
-        .collect();
-    let registry = sph_stages::standard_registry();
-    let scenario =
-        Scenario::from_str(text, file, &overrides, &registry).unwrap_or_else(|e| panic!("{e}"));
+#[test]
+fn every_shipped_scenario_is_covered() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios");
+    let mut missing = Vec::new();
+    for entry in std::fs::read_dir(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display())) {
+        let name = entry.expect("directory entry").file_name();
+        let name = name.to_string_lossy();
+        if name.ends_with(".ron") && !COVERED.contains(&name.as_ref()) {
+            missing.push(name.into_owned());
+        }
+    }
+    assert!(
+        missing.is_empty(),
+        "scenarios without a determinism test in tests/tests/threads.rs: {missing:?}"
+    );
+}
+
+/// The final fluid state by particle id, as bits.
+type State = Vec<(u32, [u64; 5])>;
+
+/// Runs on `threads` threads; returns the output folder and the final state.
+fn run_on(text: &str, file: &str, coarse: &[&str], threads: usize) -> (PathBuf, State) {
+    let mut overrides = coarse.to_vec();
+    overrides.extend(quiet(text));
     let out = temp_out(&format!("threads{threads}"));
     let opts = RunOptions {
         out_dir: out.clone(),
@@ -37,43 +77,62 @@ fn run_on(text: &str, file: &str, coarse: &[&str], threads: usize) -> PathBuf {
         trace: None,
         ..Default::default()
     };
-    let summary = run(scenario, &opts).unwrap_or_else(|e| panic!("{threads} threads: {e}"));
+    let (summary, sim) = run_keeping_state(load(text, file, &overrides), &opts)
+        .unwrap_or_else(|e| panic!("{file}, {threads} threads: {e}"));
     assert_eq!(summary.status, "completed");
     assert_eq!(summary.threads, threads);
-    assert!(summary.steps > 100, "{} steps", summary.steps);
-    out
-}
-
-#[test]
-fn dam_break_does_not_depend_on_thread_count() {
-    let coarse = ["resolution=ParticlesAcross(40)", "end_time=0.3"];
-    let file = "scenarios/dam_break.ron";
-    compare(run_on(DAM, file, &coarse, 1), run_on(DAM, file, &coarse, 2));
-}
-
-#[test]
-fn rolling_tank_does_not_depend_on_thread_count() {
-    // Moving walls, tank-frame sensors and the roll moment sum.
-    let coarse = [
-        "resolution=ParticlesAcross(60)",
-        "end_time=0.4",
-        "tank.motion.ramp=0.1",
-    ];
-    let file = "scenarios/sloshing.ron";
-    compare(
-        run_on(SLOSHING, file, &coarse, 1),
-        run_on(SLOSHING, file, &coarse, 2),
+    assert!(summary.steps > 100, "{file}: {} steps", summary.steps);
+    let p = Particles::of(&sim.world).expect("fluid particles");
+    let (id, x, v, rho) = (
+        p.fluid::<ParticleId>().expect("ids"),
+        p.fluid::<Position>().expect("positions"),
+        p.fluid::<Velocity>().expect("velocities"),
+        p.fluid::<Density>().expect("densities"),
     );
+    let mut state: State = (0..id.len())
+        .map(|i| {
+            let (x, v) = (x[i].0, v[i].0);
+            let bits = [x.x, x.y, v.x, v.y, rho[i].0].map(f64::to_bits);
+            (id[i].0, bits)
+        })
+        .collect();
+    state.sort_unstable_by_key(|s| s.0);
+    (out, state)
 }
 
-fn compare(one: PathBuf, two: PathBuf) {
-    for file in ["probes.csv", "energy.csv"] {
-        let read = |dir: &PathBuf| {
-            std::fs::read_to_string(dir.join(file))
-                .unwrap_or_else(|e| panic!("{}: {e}", dir.join(file).display()))
+/// One thread, two threads, and two threads again give identical results.
+fn check_deterministic(text: &str, file: &str, coarse: &[&str]) {
+    let (one, s1) = run_on(text, file, coarse, 1);
+    let (two, s2) = run_on(text, file, coarse, 2);
+    let (again, s3) = run_on(text, file, coarse, 2);
+    for (what, dir, state) in [("2 threads", &two, &s2), ("a repeated run", &again, &s3)] {
+        if let Some(k) = (0..s1.len()).find(|&k| s1[k] != state[k]) {
+            panic!(
+                "{file}: particle {} ends differently on 1 thread and {what} (outputs in {} and {})",
+                s1[k].0,
+                one.display(),
+                dir.display()
+            );
+        }
+        assert_eq!(s1.len(), state.len(), "{file}: particle count, {what}");
+        compare_outputs(file, &one, dir, what);
+    }
+    for dir in [one, two, again] {
+        let _ = std::fs::remove_dir_all(dir);
+    }
+}
+
+/// probes.csv and energy.csv (those the scenario writes; at least one) are identical.
+fn compare_outputs(file: &str, one: &Path, other: &Path, what: &str) {
+    let mut compared = 0;
+    for name in ["probes.csv", "energy.csv"] {
+        let (Ok(a), Ok(b)) = (
+            std::fs::read_to_string(one.join(name)),
+            std::fs::read_to_string(other.join(name)),
+        ) else {
+            continue;
         };
-        let (a, b) = (read(&one), read(&two));
-        assert!(a.lines().count() > 10, "{file} has rows:\n{a}");
+        assert!(a.lines().count() > 10, "{file}: {name} has rows:\n{a}");
         if a != b {
             let (n, (la, lb)) = a
                 .lines()
@@ -82,14 +141,14 @@ fn compare(one: PathBuf, two: PathBuf) {
                 .find(|(_, (la, lb))| la != lb)
                 .unwrap_or((0, ("(length differs)", "")));
             panic!(
-                "{file} differs between 1 and 2 threads, first at line {}:\n  1: {la}\n  2: {lb}\n(outputs kept in {} and {})",
-                n + 1,
-                one.display(),
-                two.display()
+                "{file}: {name} differs between 1 thread and {what}, first at line {}:\n  1: {la}\n  2: {lb}",
+                n + 1
             );
         }
+        compared += 1;
     }
-    for dir in [one, two] {
-        let _ = std::fs::remove_dir_all(dir);
-    }
+    assert!(
+        compared > 0,
+        "{file}: neither probes.csv nor energy.csv was written"
+    );
 }

@@ -1,0 +1,290 @@
+//! Hard-case runs (issue 5): run a scenario and report how it ended and how well it
+//! behaved: finished, stopped with a diagnostic, or panicked; the largest density
+//! fluctuation, the mechanical-energy gain and total-energy drift, particles outside
+//! the walls or the domain and non-finite values at the end.
+
+use crate::support::{load, read_csv, temp_out};
+use sph_core::components::{Density, Position, Velocity};
+use sph_core::runner::{run_keeping_state, RunOptions};
+use sph_core::walls::WallSet;
+use sph_core::world::Particles;
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::path::{Path, PathBuf};
+
+/// How a run ended.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Outcome {
+    /// Reached its end time.
+    Finished,
+    /// Stopped early with this diagnostic (the runner's error message).
+    Stopped(String),
+    /// Panicked, with the panic message: always a failure.
+    Panicked(String),
+}
+
+/// What a hard-case run measured. Energies are relative to `energy_scale` = M |g| H
+/// (total mass, gravity, the tallest block's height): the potential energy the column
+/// would lose falling its own height.
+#[derive(Clone, Debug)]
+pub struct Stability {
+    pub outcome: Outcome,
+    /// Simulated time reached [s] (the last energy sample's time if the run stopped).
+    pub time: f64,
+    /// Largest |rho/rho_0 - 1| over the probe samples (`max_density_fluctuation`).
+    pub density_fluctuation: f64,
+    /// Largest rise of kinetic + potential energy above its first sample, over
+    /// `energy_scale`: a run without inflow of energy (fixed walls) must not gain any.
+    pub mechanical_gain: f64,
+    /// Largest |total - total(first sample)| over `energy_scale`, total = kinetic +
+    /// potential + internal + dissipated by viscosity (energy.csv `total`).
+    pub total_drift: f64,
+    /// Largest speed over the probe samples [m/s] (`max_speed`; 0 if not probed).
+    pub max_speed: f64,
+    /// At the end: fluid particles behind a wall or past a corner, or outside the domain.
+    pub outside: usize,
+    /// At the end: fluid particles with a non-finite position, velocity or density.
+    pub non_finite: usize,
+    /// Particles reflected back across a wall (summary `wall_reflections`).
+    pub reflections: f64,
+    pub particles: usize,
+    pub energy_scale: f64,
+    pub out: PathBuf,
+}
+
+/// Overrides that keep a run's output cheap (no frames, pictures or plots), for the
+/// stages the scenario text has.
+pub fn quiet(text: &str) -> Vec<&'static str> {
+    [
+        ("VtkFrames(", "pipeline.vtk_frames.interval=1e9"),
+        ("Snapshots(", "pipeline.snapshots.times=[]"),
+        ("Probe(", "pipeline.probe.plots=false"),
+        ("Energy(", "pipeline.energy.plots=false"),
+    ]
+    .into_iter()
+    .filter(|(stage, _)| text.contains(stage))
+    .map(|(_, o)| o)
+    .collect()
+}
+
+/// Runs scenario `text` (`file` names it in messages) with `overrides` on two threads
+/// and measures it. The scenario must have an `Energy` stage and a `Probe` with
+/// `density_fluctuation: true` (checked).
+pub fn run_hard_case(text: &str, file: &str, overrides: &[&str]) -> Stability {
+    let mut all: Vec<&str> = overrides.to_vec();
+    all.extend(quiet(text));
+    let scenario = load(text, file, &all);
+    let mass: f64 = scenario.initial_particles().iter().map(|p| p.2).sum();
+    let g = glam::DVec2::from(scenario.spec.fluid.gravity).length();
+    let energy_scale = mass * g * scenario.fluid_height();
+    let particles = scenario.initial_particles().len();
+    let out = temp_out(&scenario.spec.name);
+    let opts = RunOptions {
+        out_dir: out.clone(),
+        threads: Some(2),
+        progress: false,
+        trace: None,
+    };
+    let result = catch_unwind(AssertUnwindSafe(|| run_keeping_state(scenario, &opts)));
+    let (outcome, end, reflections) = match result {
+        Err(panic) => {
+            let message = panic
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                .unwrap_or_default();
+            (Outcome::Panicked(message), None, 0.0)
+        }
+        Ok(Err(e)) => (Outcome::Stopped(e.to_string()), None, 0.0),
+        Ok(Ok((summary, sim))) => {
+            let reflections = summary
+                .diagnostics
+                .get("wall_reflections")
+                .copied()
+                .unwrap_or(0.0);
+            (Outcome::Finished, Some(final_state(&sim)), reflections)
+        }
+    };
+    let (outside, non_finite) = end.unwrap_or((0, 0));
+    let mut s = Stability {
+        outcome,
+        time: 0.0,
+        density_fluctuation: 0.0,
+        mechanical_gain: 0.0,
+        total_drift: 0.0,
+        max_speed: 0.0,
+        outside,
+        non_finite,
+        reflections,
+        particles,
+        energy_scale,
+        out,
+    };
+    if !matches!(s.outcome, Outcome::Panicked(_)) {
+        s.read_outputs();
+    }
+    s
+}
+
+/// (outside, non-finite) fluid particles in the final state.
+fn final_state(sim: &sph_core::Sim) -> (usize, usize) {
+    let Some(particles) = Particles::of(&sim.world) else {
+        return (0, 0);
+    };
+    let (x, v, rho) = (
+        particles.fluid::<Position>().expect("positions"),
+        particles.fluid::<Velocity>().expect("velocities"),
+        particles.fluid::<Density>().expect("densities"),
+    );
+    let mut walls = WallSet::from_world(&sim.world);
+    walls.at(sim.clock.time);
+    let (lo, hi) = sim.constants.domain;
+    let reach = sim.constants.support();
+    let outside = x
+        .iter()
+        .filter(|p| {
+            walls.crossed(p.0, reach).is_some() || p.0.cmplt(lo).any() || p.0.cmpgt(hi).any()
+        })
+        .count();
+    let non_finite = (0..x.len())
+        .filter(|&i| !(x[i].0.is_finite() && v[i].0.is_finite() && rho[i].0.is_finite()))
+        .count();
+    (outside, non_finite)
+}
+
+impl Stability {
+    fn read_outputs(&mut self) {
+        let column = |path: &Path, name: &str| -> Option<Vec<(f64, f64)>> {
+            let (header, rows) = read_csv(path);
+            let k = header.iter().position(|h| h == name)?;
+            Some(rows.iter().map(|r| (r[0], r[k])).collect())
+        };
+        let energy = self.out.join("energy.csv");
+        let (kinetic, potential, total) = (
+            column(&energy, "kinetic").expect("the scenario needs an Energy stage"),
+            column(&energy, "potential").expect("potential"),
+            column(&energy, "total").expect("total"),
+        );
+        let probes = self.out.join("probes.csv");
+        let rho = column(&probes, "max_density_fluctuation")
+            .expect("the scenario needs Probe(density_fluctuation: true)");
+        let max = |s: &[(f64, f64)]| s.iter().map(|p| p.1).fold(0.0, f64::max);
+        self.density_fluctuation = max(&rho);
+        self.max_speed = column(&probes, "max_speed").map_or(0.0, |s| max(&s));
+        self.time = total.last().map_or(0.0, |p| p.0);
+        let mechanical: Vec<f64> = kinetic
+            .iter()
+            .zip(&potential)
+            .map(|(k, p)| k.1 + p.1)
+            .collect();
+        if let (Some(&m0), Some(&t0)) = (mechanical.first(), total.first()) {
+            self.mechanical_gain = mechanical
+                .iter()
+                .map(|m| (m - m0) / self.energy_scale)
+                .fold(0.0, f64::max);
+            self.total_drift = total
+                .iter()
+                .map(|t| ((t.1 - t0.1) / self.energy_scale).abs())
+                .fold(0.0, f64::max);
+        }
+        // A non-finite sample counts as unbounded.
+        for v in [
+            &mut self.density_fluctuation,
+            &mut self.mechanical_gain,
+            &mut self.total_drift,
+        ] {
+            if v.is_nan() {
+                *v = f64::INFINITY;
+            }
+        }
+    }
+
+    /// One line for test output and docs/validation.md.
+    pub fn report(&self, case: &str) -> String {
+        let outcome = match &self.outcome {
+            Outcome::Finished => "finished".to_string(),
+            Outcome::Stopped(m) => format!("stopped: {m}"),
+            Outcome::Panicked(m) => format!("PANICKED: {m}"),
+        };
+        format!(
+            "{case}: {} particles, t = {:.3} s, max |rho/rho0-1| = {:.4}, mechanical gain = {:.2e}, \
+             total drift = {:.2e} (of M g H = {:.4} J/m), max speed = {:.3} m/s, reflections = {}, \
+             outside = {}, non-finite = {}; {outcome}",
+            self.particles,
+            self.time,
+            self.density_fluctuation,
+            self.mechanical_gain,
+            self.total_drift,
+            self.energy_scale,
+            self.max_speed,
+            self.reflections,
+            self.outside,
+            self.non_finite,
+        )
+    }
+
+    /// Asserts the run finished with every particle inside and finite, and within the
+    /// bounds; leaves the output folder for inspection on failure, removes it otherwise.
+    pub fn assert_finished_within(&self, case: &str, bounds: &Bounds) {
+        let report = self.report(case);
+        eprintln!("{report}");
+        assert_eq!(self.outcome, Outcome::Finished, "{report}");
+        assert_eq!(self.outside, 0, "{report}");
+        assert_eq!(self.non_finite, 0, "{report}");
+        self.assert_bounds(&report, bounds);
+        let _ = std::fs::remove_dir_all(&self.out);
+    }
+
+    fn assert_bounds(&self, report: &str, b: &Bounds) {
+        let checks = [
+            ("max |rho/rho0 - 1|", self.density_fluctuation, b.density),
+            ("mechanical gain", self.mechanical_gain, b.mechanical_gain),
+            ("total drift", self.total_drift, b.total_drift),
+            ("max speed", self.max_speed, b.max_speed),
+        ];
+        for (what, value, bound) in checks {
+            assert!(
+                value <= bound,
+                "{what} = {value:.4e} exceeds {bound:.4e}\n{report}\n(outputs in {})",
+                self.out.display()
+            );
+        }
+    }
+
+    /// Asserts either of the issue's acceptable ends: finished within `bounds` (as
+    /// [`Stability::assert_finished_within`]), or stopped with a located diagnostic.
+    pub fn assert_finished_within_or_stopped(&self, case: &str, bounds: &Bounds) {
+        match self.outcome {
+            Outcome::Stopped(_) => {
+                self.assert_stopped_with_diagnostic(case);
+            }
+            _ => self.assert_finished_within(case, bounds),
+        }
+    }
+
+    /// Asserts the run stopped with the foundation issue's diagnostic: it names when
+    /// (step and time) and where (particle and position, or wall) it stopped.
+    pub fn assert_stopped_with_diagnostic(&self, case: &str) -> &str {
+        let report = self.report(case);
+        eprintln!("{report}");
+        let Outcome::Stopped(message) = &self.outcome else {
+            panic!("expected a stop with a diagnostic: {report}");
+        };
+        for part in ["step ", ", t = ", " s, stage `", " at x = ", " m, y = "] {
+            assert!(
+                message.contains(part),
+                "diagnostic lacks `{part}`: {message}"
+            );
+        }
+        let _ = std::fs::remove_dir_all(&self.out);
+        message
+    }
+}
+
+/// Upper bounds for [`Stability`]'s measures (`f64::INFINITY`: not bounded).
+#[derive(Clone, Copy, Debug)]
+pub struct Bounds {
+    pub density: f64,
+    pub mechanical_gain: f64,
+    pub total_drift: f64,
+    pub max_speed: f64,
+}
