@@ -83,6 +83,7 @@ pub fn run_hard_case(text: &str, file: &str, overrides: &[&str]) -> Stability {
         threads: Some(2),
         progress: false,
         trace: None,
+        ..Default::default()
     };
     let result = catch_unwind(AssertUnwindSafe(|| run_keeping_state(scenario, &opts)));
     let (outcome, end, reflections) = match result {

@@ -8,7 +8,7 @@
 use sph_core::Scenario;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
-const SHIPPED: [(&str, &str); 5] = [
+const SHIPPED: [(&str, &str); 7] = [
     (
         "scenarios/dam_break.ron",
         include_str!("../../scenarios/dam_break.ron"),
@@ -28,6 +28,14 @@ const SHIPPED: [(&str, &str); 5] = [
     (
         "scenarios/anti_roll_tank.ron",
         include_str!("../../scenarios/anti_roll_tank.ron"),
+    ),
+    (
+        "scenarios/wave_maker.ron",
+        include_str!("../../scenarios/wave_maker.ron"),
+    ),
+    (
+        "scenarios/wave_breaking.ron",
+        include_str!("../../scenarios/wave_breaking.ron"),
     ),
 ];
 
