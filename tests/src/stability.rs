@@ -78,13 +78,7 @@ pub fn run_hard_case(text: &str, file: &str, overrides: &[&str]) -> Stability {
     let energy_scale = mass * g * scenario.fluid_height();
     let particles = scenario.initial_particles().len();
     let out = temp_out(&scenario.spec.name);
-    let opts = RunOptions {
-        out_dir: out.clone(),
-        threads: Some(2),
-        progress: false,
-        trace: None,
-        ..Default::default()
-    };
+    let opts = RunOptions::quiet(&out, 2);
     let result = catch_unwind(AssertUnwindSafe(|| run_keeping_state(scenario, &opts)));
     let (outcome, end, reflections) = match result {
         Err(panic) => {

@@ -31,13 +31,7 @@ pub fn load(text: &str, file: &str, overrides: &[&str]) -> Scenario {
 /// the final state and the folder.
 pub fn run_completed(scenario: Scenario, tag: &str, threads: usize) -> (Summary, Sim, PathBuf) {
     let out = temp_out(tag);
-    let opts = RunOptions {
-        out_dir: out.clone(),
-        threads: Some(threads),
-        progress: false,
-        trace: None,
-        ..Default::default()
-    };
+    let opts = RunOptions::quiet(&out, threads);
     let (summary, sim) =
         run_keeping_state(scenario, &opts).unwrap_or_else(|e| panic!("{tag}: {e}"));
     assert_eq!(summary.status, "completed");

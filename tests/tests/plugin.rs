@@ -20,13 +20,7 @@ fn plugin_stage_runs_and_writes_its_series() {
     let ritter = 2.0 * ((gx * gx + gy * gy).sqrt() * scenario.fluid_height()).sqrt();
     let bound = ritter.min(1.0);
     let out = sph_tests::support::temp_out("plugin");
-    let opts = RunOptions {
-        out_dir: out.clone(),
-        threads: Some(2),
-        progress: false,
-        trace: None,
-        ..Default::default()
-    };
+    let opts = RunOptions::quiet(&out, 2);
     let summary = run(scenario, &opts).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(summary.status, "completed");
     assert!(

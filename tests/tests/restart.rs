@@ -45,11 +45,7 @@ fn sloshing() -> Scenario {
 }
 
 fn options(out: &Path, threads: usize) -> RunOptions {
-    RunOptions {
-        out_dir: out.to_path_buf(),
-        threads: Some(threads),
-        ..RunOptions::default()
-    }
+    RunOptions::quiet(out, threads)
 }
 
 /// Runs to the end; returns the folder.

@@ -70,13 +70,7 @@ fn run_on(text: &str, file: &str, coarse: &[&str], threads: usize) -> (PathBuf, 
     let mut overrides = coarse.to_vec();
     overrides.extend(quiet(text));
     let out = temp_out(&format!("threads{threads}"));
-    let opts = RunOptions {
-        out_dir: out.clone(),
-        threads: Some(threads),
-        progress: false,
-        trace: None,
-        ..Default::default()
-    };
+    let opts = RunOptions::quiet(&out, threads);
     let (summary, sim) = run_keeping_state(load(text, file, &overrides), &opts)
         .unwrap_or_else(|e| panic!("{file}, {threads} threads: {e}"));
     assert_eq!(summary.status, "completed");

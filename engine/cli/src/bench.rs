@@ -286,13 +286,7 @@ pub fn run_case(
     {
         return Err("BenchStop did not land at the end of the pipeline".into());
     }
-    let opts = RunOptions {
-        out_dir: out.to_path_buf(),
-        threads: Some(case.threads),
-        progress: false,
-        trace: None,
-        ..Default::default()
-    };
+    let opts = RunOptions::quiet(out, case.threads);
     let (summary, sim) = run_keeping_state(scenario, &opts).map_err(|e| e.to_string())?;
     let end_bytes = proc_status("VmRSS:");
     let (heap_end, heap_peak) = heap_bytes();

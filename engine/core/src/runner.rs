@@ -40,6 +40,18 @@ pub struct RunOptions {
     pub origin: Origin,
 }
 
+impl RunOptions {
+    /// A batch run into `out_dir` on `threads` threads: no progress bar, no trace, no
+    /// checkpoints (sweeps, studies, benchmarks, tests).
+    pub fn quiet(out_dir: impl Into<PathBuf>, threads: usize) -> Self {
+        Self {
+            out_dir: out_dir.into(),
+            threads: Some(threads),
+            ..Self::default()
+        }
+    }
+}
+
 /// Time spent in one stage.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct StageTime {

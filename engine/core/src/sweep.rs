@@ -217,13 +217,7 @@ fn run_case(
     let motion = scenario.motion.clone().ok_or("no motion")?;
     let axis_height = tank.pivot().y;
     let dir = out_dir.join(&case.name);
-    let opts = RunOptions {
-        out_dir: dir.clone(),
-        threads: Some(1),
-        progress: false,
-        trace: None,
-        ..Default::default()
-    };
+    let opts = RunOptions::quiet(&dir, 1);
     let summary = match run(scenario, &opts) {
         Ok(s) => s,
         Err(RunError::Step { error, .. }) => {

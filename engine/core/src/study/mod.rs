@@ -494,13 +494,7 @@ fn run_case(
         .map_err(|e| format!("{}: {e}", dir.display()))?;
     let scenario =
         Scenario::load(&study.scenario, &case.overrides, registry).map_err(|e| e.to_string())?;
-    let opts = RunOptions {
-        out_dir: dir.to_path_buf(),
-        threads: Some(threads),
-        progress: false,
-        trace: None,
-        ..RunOptions::default()
-    };
+    let opts = RunOptions::quiet(dir, threads);
     match run_keeping_state(scenario, &opts) {
         Ok((_, sim)) => {
             let mut csv = String::from("x,y\n");
