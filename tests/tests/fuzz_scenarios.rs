@@ -8,7 +8,7 @@
 use sph_core::Scenario;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
-const SHIPPED: [(&str, &str); 7] = [
+const SHIPPED: [(&str, &str); 8] = [
     (
         "scenarios/dam_break.ron",
         include_str!("../../scenarios/dam_break.ron"),
@@ -36,6 +36,10 @@ const SHIPPED: [(&str, &str); 7] = [
     (
         "scenarios/wave_breaking.ron",
         include_str!("../../scenarios/wave_breaking.ron"),
+    ),
+    (
+        "scenarios/eagre_wavemaker.ron",
+        include_str!("../../scenarios/eagre_wavemaker.ron"),
     ),
 ];
 
