@@ -143,7 +143,9 @@ pub enum Metric {
         #[serde(default)]
         name: Option<String>,
     },
-    /// A wave gauge [m] against data (t [s], eta [m]): `<c>_rms_error` over [from, to] s.
+    /// A wave gauge against data (t [s], eta [m]): the gauge's rise above its first
+    /// reading (the still-water level as the gauge reads it; probes.csv holds the surface
+    /// height above the floor) against eta, `<c>_rms_error` [m] over [from, to] s.
     WaveGauge {
         column: String,
         reference: String,
@@ -739,9 +741,12 @@ fn metric_values(
             to,
         } => {
             let data = reference(&study.resolve(r));
+            let height = probes(column);
+            let still = height.first().map_or(0.0, |p| p.1);
+            let eta: Vec<(f64, f64)> = height.iter().map(|&(t, h)| (t, h - still)).collect();
             vec![(
                 format!("{}_rms_error", base(column)),
-                metrics::rms_difference(&probes(column), &data, *from, *to),
+                metrics::rms_difference(&eta, &data, *from, *to),
             )]
         }
         Metric::Hydrostatic { column, from } => {
