@@ -264,7 +264,10 @@ pub fn run_case(
             .rfind(']')
             .ok_or("the scenario has no pipeline list to append BenchStop to")?;
         text.insert_str(at, &format!("BenchStop(steps: {}),\n", case.steps));
-        overrides.push("end_time=1.0e6".into());
+        // BenchStop ends the run; the end time only has to lie beyond the steps (a few
+        // hundred at dt ~ 1e-4 s) and keep the probes' and frames' row counts inside
+        // the engine's size limits, which an unbounded end time would break.
+        overrides.push("end_time=10.0".into());
     } else {
         overrides.push(format!("end_time={}", case.end_time));
     }
