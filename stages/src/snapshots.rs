@@ -128,18 +128,18 @@ impl Stage for Snapshots {
         let mut set = WallSet::from_world(&sim.world);
         let walls: Vec<(DVec2, DVec2)> =
             set.at(sim.clock.time).iter().map(|w| (w.a, w.b)).collect();
-        let (mut lo, mut hi) = (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY));
-        for &(a, b) in &walls {
-            lo = lo.min(a).min(b);
-            hi = hi.max(a).max(b);
-        }
-        for q in &positions {
-            lo = lo.min(*q);
-            hi = hi.max(*q);
-        }
-        if let Some(((x0, y0), (x1, y1))) = self.params.region {
-            (lo, hi) = (DVec2::new(x0, y0), DVec2::new(x1, y1));
-        }
+        // The requested region, or everything: walls and particles.
+        let (lo, hi) = match self.params.region {
+            Some(((x0, y0), (x1, y1))) => (DVec2::new(x0, y0), DVec2::new(x1, y1)),
+            None => walls
+                .iter()
+                .flat_map(|&(a, b)| [a, b])
+                .chain(positions.iter().copied())
+                .fold(
+                    (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)),
+                    |(lo, hi), q| (lo.min(q), hi.max(q)),
+                ),
+        };
         let c = &sim.constants;
         let range = self
             .params

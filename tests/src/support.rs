@@ -38,26 +38,10 @@ pub fn run_completed(scenario: Scenario, tag: &str, threads: usize) -> (Summary,
     (summary, sim, out)
 }
 
-/// Numeric rows of a CSV file, skipping `#` comment lines; returns (header, rows).
+/// Numeric rows of a CSV file, skipping `#` comment lines; returns (header, rows)
+/// ([`sph_core::series::read_table`], panicking on error).
 pub fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
-    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let mut lines = text
-        .lines()
-        .filter(|l| !l.starts_with('#') && !l.trim().is_empty());
-    let header = lines
-        .next()
-        .unwrap_or_default()
-        .split(',')
-        .map(|s| s.trim().to_string())
-        .collect();
-    let rows = lines
-        .map(|l| {
-            l.split(',')
-                .map(|v| v.trim().parse().unwrap_or(f64::NAN))
-                .collect()
-        })
-        .collect();
-    (header, rows)
+    sph_core::series::read_table(path).unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// Column `name` of a CSV against its first column.

@@ -101,42 +101,23 @@ pub struct RunArgs {
 /// Parses the command line and runs; the exit code is non-zero on any error.
 pub fn main_with(registry: StageRegistry) -> ExitCode {
     let cli = Cli::parse();
-    match cli.command {
+    let done = |()| ExitCode::SUCCESS;
+    let result = match cli.command {
         Some(Command::Stages) => {
             for (name, summary) in registry.list() {
                 println!("{:<16} {summary}", sph_core::registry::camel_case(name));
             }
-            ExitCode::SUCCESS
+            Ok(ExitCode::SUCCESS)
         }
-        Some(Command::Bench(args)) => match bench::main(&args) {
-            Ok(()) => ExitCode::SUCCESS,
-            Err(message) => {
-                eprintln!("error: {message}");
-                ExitCode::FAILURE
-            }
-        },
-        Some(Command::Resume(args)) => match resume(&args, &registry) {
-            Ok(code) => code,
-            Err(message) => {
-                eprintln!("error: {message}");
-                ExitCode::FAILURE
-            }
-        },
-        Some(Command::Study(args)) => match study::main(&args, &registry) {
-            Ok(()) => ExitCode::SUCCESS,
-            Err(message) => {
-                eprintln!("error: {message}");
-                ExitCode::FAILURE
-            }
-        },
-        None => match run_scenario(&cli.run, &registry) {
-            Ok(code) => code,
-            Err(message) => {
-                eprintln!("error: {message}");
-                ExitCode::FAILURE
-            }
-        },
-    }
+        Some(Command::Bench(args)) => bench::main(&args).map(done),
+        Some(Command::Resume(args)) => resume(&args, &registry),
+        Some(Command::Study(args)) => study::main(&args, &registry).map(done),
+        None => run_scenario(&cli.run, &registry),
+    };
+    result.unwrap_or_else(|message| {
+        eprintln!("error: {message}");
+        ExitCode::FAILURE
+    })
 }
 
 /// Exit code of a run stopped by Ctrl-C (128 + SIGINT), after its checkpoint.

@@ -173,13 +173,17 @@ pub fn incident_reflected(gauges: &[GaugeHarmonic], k: f64) -> Option<WaveSplit>
 /// `k_range`. Unlike a phase difference this is not biased by the partial standing wave
 /// a reflection makes.
 pub fn wavenumber_fit(gauges: &[GaugeHarmonic], k_range: (f64, f64)) -> Option<f64> {
+    if gauges.len() < 3 {
+        return None;
+    }
     let misfit = |k: f64| incident_reflected(gauges, k).map_or(f64::INFINITY, |w| w.residual);
     // A fine scan finds the basin, golden sections refine it.
     let steps = 400;
     let dk = (k_range.1 - k_range.0) / steps as f64;
-    let best = (0..=steps)
+    let (best, _) = (0..=steps)
         .map(|j| k_range.0 + j as f64 * dk)
-        .min_by(|a, b| misfit(*a).total_cmp(&misfit(*b)))?;
+        .map(|k| (k, misfit(k)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))?;
     let (mut lo, mut hi) = (best - dk, best + dk);
     let phi = (5f64.sqrt() - 1.0) / 2.0;
     for _ in 0..60 {
@@ -191,7 +195,7 @@ pub fn wavenumber_fit(gauges: &[GaugeHarmonic], k_range: (f64, f64)) -> Option<f
         }
     }
     let k = 0.5 * (lo + hi);
-    (gauges.len() >= 3 && misfit(k).is_finite()).then_some(k)
+    misfit(k).is_finite().then_some(k)
 }
 
 /// Linear theory for a flume driven by a sinusoidal piston (analytic.md section 5),
@@ -277,7 +281,6 @@ impl WaveTheory {
             let (t, eta): (Vec<f64>, Vec<f64>) = read_series(probes, name)
                 .map_err(|e| format!("{e}; wave gauges need `wave_gauges` and a Probe()"))?
                 .into_iter()
-                .filter(|(t, _)| *t >= t0)
                 .unzip();
             let (amplitude, phase) = harmonic(&t, &eta, self.omega, t0, t1).ok_or_else(|| {
                 format!(
