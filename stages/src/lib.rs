@@ -19,6 +19,7 @@ pub mod neighbour_grid;
 pub mod packed;
 pub mod probe;
 pub mod reinitialise;
+pub mod scan;
 pub mod snapshots;
 pub mod sort_particles;
 pub mod vtk_frames;

@@ -7,6 +7,7 @@
 //! the same whatever the thread count. The lists are reused by every later stage of the
 //! step.
 
+use crate::scan::Scan;
 use crate::sort_particles::{counting_sort, sort_by_cell, SortScratch};
 use glam::DVec2;
 use rayon::prelude::*;
@@ -89,11 +90,11 @@ pub struct CellGrid {
     /// `start[c]..start[c+1]` indexes `particles` (and `xs`) for cell c.
     start: Vec<u32>,
     /// Joint indices, cell by cell, ascending within a cell.
-    particles: Vec<u32>,
+    pub(crate) particles: Vec<u32>,
     /// x and y of the positions in the order of `particles` (separate arrays), so a
     /// candidate scan reads contiguous memory and its distance test vectorises.
-    xs: Vec<f64>,
-    ys: Vec<f64>,
+    pub(crate) xs: Vec<f64>,
+    pub(crate) ys: Vec<f64>,
     /// Each particle's cell (scratch kept between steps).
     cells: Vec<u32>,
 }
@@ -110,11 +111,12 @@ impl CellGrid {
 
     #[inline(always)]
     fn cell_of(&self, x: DVec2) -> (usize, usize) {
-        let c = ((x - self.origin) / self.cell).floor();
-        (
-            c.x.clamp(0.0, (self.nx - 1) as f64) as usize,
-            c.y.clamp(0.0, (self.ny - 1) as f64) as usize,
-        )
+        // floor by truncation (a positive number truncates to its floor; anything
+        // else, NaN included, goes to cell 0 as the clamp did): `f64::floor` is a
+        // library call on baseline x86-64.
+        let c = (x - self.origin) / self.cell;
+        let index = |c: f64, n: usize| if c > 0.0 { (c as usize).min(n - 1) } else { 0 };
+        (index(c.x, self.nx), index(c.y, self.ny))
     }
 
     #[inline(always)]
@@ -153,7 +155,7 @@ impl CellGrid {
     /// The index ranges (into `particles` / `xs`) of the `ROWS` x `ROWS` cells around
     /// `x`, one per row of cells, in the fixed order (rows bottom to top).
     #[inline(always)]
-    fn ranges_near(&self, x: DVec2) -> [std::ops::Range<usize>; ROWS] {
+    pub(crate) fn ranges_near(&self, x: DVec2) -> [std::ops::Range<usize>; ROWS] {
         let (cx, cy) = self.cell_of(x);
         let (x0, x1) = (cx.saturating_sub(REACH), (cx + REACH).min(self.nx - 1));
         std::array::from_fn(|k| {
@@ -185,8 +187,8 @@ impl CellGrid {
 #[derive(Default)]
 pub struct NeighbourBlock {
     /// `list[offsets[k]..offsets[k+1]]` are the neighbours of the block's k-th particle.
-    offsets: Vec<u32>,
-    list: Vec<u32>,
+    pub(crate) offsets: Vec<u32>,
+    pub(crate) list: Vec<u32>,
 }
 
 /// The neighbour lists of one step, kept in blocks of [`BLOCK`] particles that are
@@ -315,44 +317,10 @@ impl NeighbourGrid {
         let n = nb.n_fluid;
         nb.blocks
             .resize_with(n.div_ceil(BLOCK), NeighbourBlock::default);
+        let scan = Scan::detect();
         nb.blocks.par_iter_mut().enumerate().for_each(|(b, block)| {
             let range = b * BLOCK..((b + 1) * BLOCK).min(n);
-            block.offsets.clear();
-            block.offsets.push(0);
-            block.list.clear();
-            for i in range {
-                let xi = fpos[i].0;
-                let ranges = grid.ranges_near(xi);
-                // Branch-free append: write every candidate, keep it (advance the
-                // length) if it is within the support and not i itself.
-                let base = block.list.len();
-                let total: usize = ranges.iter().map(|r| r.len()).sum();
-                // Grow by an eighth rather than by doubling: the lists keep their
-                // capacity from step to step, so doubling would hold up to twice the
-                // memory the lists need.
-                let need = base + total;
-                if need > block.list.capacity() {
-                    let more = (need - block.list.len()).max(block.list.len() / 8);
-                    block.list.reserve_exact(more);
-                }
-                block.list.resize(need, 0);
-                // A plain slice, so the loop keeps its pointer in a register.
-                let out = &mut block.list[base..];
-                let mut kept = 0;
-                for cand in ranges {
-                    let (xs, ys) = (&grid.xs[cand.clone()], &grid.ys[cand.clone()]);
-                    let ids = &grid.particles[cand];
-                    for ((&x, &y), &j) in xs.iter().zip(ys).zip(ids) {
-                        let (dx, dy) = (xi.x - x, xi.y - y);
-                        let keep = (dx * dx + dy * dy < r2max) & (j as usize != i);
-                        out[kept] = j;
-                        kept += keep as usize;
-                    }
-                }
-                let len = base + kept;
-                block.list.truncate(len);
-                block.offsets.push(len as u32);
-            }
+            scan.build_block(grid, fpos, r2max, range, block);
         });
         nb.blocks.truncate(n.div_ceil(BLOCK));
         if self.count {
