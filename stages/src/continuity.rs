@@ -3,6 +3,7 @@
 
 use crate::neighbour_grid::Neighbours;
 use crate::packed::{with_packed, Fill};
+use crate::pair_x8::WendlandX8;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::components::{DensityRate, Fluid};
@@ -45,8 +46,13 @@ impl Stage for Continuity {
             };
             let mut rate = particles.fluid_mut::<DensityRate>()?;
             let c = &sim.constants;
+            let x8 = WendlandX8::detect(c.kernel, c.h);
             with_kernel!(c.kernel, c.h, |k| {
                 rate.par_iter_mut().enumerate().for_each(|(i, out)| {
+                    if let Some(x8) = x8 {
+                        out.0 = x8.continuity(all, nb.of(i), i);
+                        return;
+                    }
                     let (xi, vi) = (all[i].x, all[i].v);
                     let mut sum = 0.0;
                     for &j in nb.of(i) {

@@ -11,6 +11,7 @@
 use crate::continuity::{require_neighbours, ContinuityInPipeline};
 use crate::neighbour_grid::Neighbours;
 use crate::packed::{with_packed, Fill, Packed};
+use crate::pair_x8::WendlandX8;
 use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -166,11 +167,22 @@ impl Forces {
         let rate_out: &mut [DensityRate] = rate.as_deref_mut().unwrap_or(&mut []);
         with_kernel!(c.kernel, h, |k| {
             let prm = Pair::new(&self.params, k.w(ds), h);
-            let pair = |i: usize| match (art, with_rate) {
-                (true, true) => sum_over_neighbours::<_, true, true>(&prm, &k, all, nb.of(i), i),
-                (true, false) => sum_over_neighbours::<_, true, false>(&prm, &k, all, nb.of(i), i),
-                (false, true) => sum_over_neighbours::<_, false, true>(&prm, &k, all, nb.of(i), i),
-                (false, false) => {
+            let x8 = WendlandX8::detect(c.kernel, h);
+            let pair = |i: usize| match (x8, art, with_rate) {
+                (Some(x8), true, true) => x8.sums::<true, true, true>(&prm, all, nb.of(i), i),
+                (Some(x8), true, false) => x8.sums::<true, true, false>(&prm, all, nb.of(i), i),
+                (Some(x8), false, true) => x8.sums::<true, false, true>(&prm, all, nb.of(i), i),
+                (Some(x8), false, false) => x8.sums::<true, false, false>(&prm, all, nb.of(i), i),
+                (None, true, true) => {
+                    sum_over_neighbours::<_, true, true>(&prm, &k, all, nb.of(i), i)
+                }
+                (None, true, false) => {
+                    sum_over_neighbours::<_, true, false>(&prm, &k, all, nb.of(i), i)
+                }
+                (None, false, true) => {
+                    sum_over_neighbours::<_, false, true>(&prm, &k, all, nb.of(i), i)
+                }
+                (None, false, false) => {
                     sum_over_neighbours::<_, false, false>(&prm, &k, all, nb.of(i), i)
                 }
             };
@@ -216,21 +228,21 @@ fn optional_chunks<T: Send>(
 }
 
 /// The constants of the pair loop, derived once per step from the parameters.
-struct Pair {
-    alpha: f64,
-    beta: f64,
-    epsilon: f64,
-    epsilon_positive: f64,
-    exponent: u32,
+pub(crate) struct Pair {
+    pub alpha: f64,
+    pub beta: f64,
+    pub epsilon: f64,
+    pub epsilon_positive: f64,
+    pub exponent: u32,
     /// 1 / W(ds), for f_ij = (W(r_ij)/W(ds))^n.
-    inv_w_ds: f64,
-    h: f64,
+    pub inv_w_ds: f64,
+    pub h: f64,
     /// eta^2 = 0.01 h^2 in phi_ij = h v_ij.x_ij / (r^2 + eta^2).
-    eta2: f64,
+    pub eta2: f64,
 }
 
 impl Pair {
-    fn new(p: &Params, w_ds: f64, h: f64) -> Self {
+    pub(crate) fn new(p: &Params, w_ds: f64, h: f64) -> Self {
         Self {
             alpha: p.alpha,
             beta: p.beta,
@@ -246,20 +258,20 @@ impl Pair {
 
 /// One fluid particle's sums over its neighbours.
 #[derive(Clone, Copy)]
-struct Sums {
+pub(crate) struct Sums {
     /// Pressure, viscous and artificial-pressure acceleration (gravity not included).
-    acc: DVec2,
+    pub acc: DVec2,
     /// sum_j m_j Pi_ij v_ij . grad W (for the dissipation rate).
-    visc_power: f64,
+    pub visc_power: f64,
     /// d rho_i/dt by the continuity equation (0 unless asked for).
-    rate: f64,
+    pub rate: f64,
 }
 
 /// Pressure and viscous acceleration of particle i, sum_j m_j Pi_ij v_ij . grad W and,
 /// with `RATE`, the continuity equation's sum_j m_j v_ij . grad W. `ART` selects
 /// Monaghan's artificial pressure at compile time.
 #[inline(always)]
-fn sum_over_neighbours<K: Kernel, const ART: bool, const RATE: bool>(
+pub(crate) fn sum_over_neighbours<K: Kernel, const ART: bool, const RATE: bool>(
     prm: &Pair,
     k: &K,
     all: &[Packed],

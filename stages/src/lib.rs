@@ -17,6 +17,7 @@ pub mod integrate;
 pub mod mls;
 pub mod neighbour_grid;
 pub mod packed;
+pub mod pair_x8;
 pub mod probe;
 pub mod reinitialise;
 pub mod scan;

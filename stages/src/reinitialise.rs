@@ -11,6 +11,7 @@ use crate::integrate::HalfDensity;
 use crate::mls::MlsSums;
 use crate::neighbour_grid::Neighbours;
 use crate::packed::{with_packed, Fill, Packed};
+use crate::pair_x8::WendlandX8;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::components::Density;
@@ -74,6 +75,7 @@ impl Stage for Reinitialise {
             };
             let c = &sim.constants;
             filtered.resize(nb.n_fluid, 0.0);
+            let x8 = WendlandX8::detect(c.kernel, c.h);
             with_kernel!(c.kernel, c.h, |k| {
                 let w0 = k.w(0.0);
                 filtered.par_iter_mut().enumerate().for_each(|(i, out)| {
@@ -92,6 +94,10 @@ impl Stage for Reinitialise {
                             sums.add(d, k.w(d.length()), pj.m, pj.rho);
                         }
                         *out = sums.mls();
+                        return;
+                    }
+                    if let Some(x8) = x8 {
+                        *out = x8.shepard(all, nb.of(i), i);
                         return;
                     }
                     let (mut num, mut den) = (mi * w0, mi / rhoi * w0);

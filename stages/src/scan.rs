@@ -26,7 +26,8 @@ impl Scan {
     /// The fastest scan the processor supports.
     pub fn detect() -> Self {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx512f")
+        if simd_allowed()
+            && std::arch::is_x86_feature_detected!("avx512f")
             && std::arch::is_x86_feature_detected!("avx512vl")
         {
             return Scan::Avx512;
@@ -59,6 +60,13 @@ impl Scan {
             Scan::Avx512 => unsafe { avx512::build_block(grid, fpos, r2max, range, block) },
         }
     }
+}
+
+/// False when the environment variable `SPH_NO_SIMD` is set (to anything): every
+/// stage then takes its portable scalar path, for comparisons and for results that
+/// agree bit for bit across processors (docs/performance.md).
+pub fn simd_allowed() -> bool {
+    std::env::var_os("SPH_NO_SIMD").is_none()
 }
 
 /// The candidates of one row of cells: their x, y and joint indices.
