@@ -5,7 +5,7 @@
 //!
 //! Two implementations give the same lists, element for element: a portable scalar one
 //! (a branch-free append) and, where the processor has AVX-512, one that tests eight
-//! candidates at a time and writes the kept ones with a compress-store. The distance
+//! candidates at a time and compresses the kept ones to the front. The distance
 //! test is the same arithmetic in both (dx*dx + dy*dy < r_s^2, no fused multiply-add),
 //! so a run's numbers do not depend on which one the machine uses.
 
@@ -29,6 +29,7 @@ impl Scan {
         if simd_allowed()
             && std::arch::is_x86_feature_detected!("avx512f")
             && std::arch::is_x86_feature_detected!("avx512vl")
+            && std::arch::is_x86_feature_detected!("popcnt")
         {
             return Scan::Avx512;
         }
@@ -55,7 +56,7 @@ impl Scan {
     ) {
         match self {
             Scan::Scalar => build_block(grid, fpos, r2max, range, block, scan_scalar),
-            // SAFETY: `detect` found AVX-512F and VL on this processor.
+            // SAFETY: `detect` found AVX-512F, VL and POPCNT on this processor.
             #[cfg(target_arch = "x86_64")]
             Scan::Avx512 => unsafe { avx512::build_block(grid, fpos, r2max, range, block) },
         }
@@ -142,8 +143,8 @@ mod avx512 {
     /// [`super::build_block`] compiled for AVX-512 with the eight-lane scan inlined.
     ///
     /// # Safety
-    /// The processor must support AVX-512F and AVX-512VL.
-    #[target_feature(enable = "avx512f,avx512vl")]
+    /// The processor must support AVX-512F, AVX-512VL and POPCNT.
+    #[target_feature(enable = "avx512f,avx512vl,popcnt")]
     pub(super) unsafe fn build_block(
         grid: &CellGrid,
         fpos: &[Position],
@@ -159,8 +160,8 @@ mod avx512 {
     }
 
     /// Eight candidates at a time: masked loads for the tail, the distance test as in
-    /// [`super::scan_scalar`], and a compress-store of the kept indices.
-    #[target_feature(enable = "avx512f,avx512vl")]
+    /// [`super::scan_scalar`], and the kept indices compressed to the front.
+    #[target_feature(enable = "avx512f,avx512vl,popcnt")]
     #[inline]
     pub(super) unsafe fn scan(
         xi: DVec2,
@@ -183,8 +184,10 @@ mod avx512 {
                 (1u8 << (n - k)) - 1
             };
             // SAFETY: the masked loads read only lanes k..min(k + 8, n) of slices of
-            // length n; the compress-store writes popcount(keep) <= n - k elements at
-            // out[kept..], and kept <= k, so it stays within out[..n].
+            // length n. The kept indices are compressed in a register and stored: all
+            // eight lanes where out[kept..] has room for them (a plain store is much
+            // faster than a compress-store), else only the kept ones, popcount(keep)
+            // <= n - k elements at out[kept..] with kept <= k, within out[..n].
             unsafe {
                 let x = _mm512_maskz_loadu_pd(lanes, c.xs.as_ptr().add(k));
                 let y = _mm512_maskz_loadu_pd(lanes, c.ys.as_ptr().add(k));
@@ -193,8 +196,15 @@ mod avx512 {
                 let d2 = _mm512_add_pd(_mm512_mul_pd(dx, dx), _mm512_mul_pd(dy, dy));
                 let near = _mm512_mask_cmp_pd_mask::<_CMP_LT_OQ>(lanes, d2, r2);
                 let keep = near & _mm256_cmpneq_epi32_mask(j, me);
-                _mm256_mask_compressstoreu_epi32(out.as_mut_ptr().add(kept) as *mut _, keep, j);
-                kept += keep.count_ones() as usize;
+                let packed = _mm256_maskz_compress_epi32(keep, j);
+                let count = keep.count_ones() as usize;
+                let at = out.as_mut_ptr().add(kept);
+                if kept + 8 <= out.len() {
+                    _mm256_storeu_si256(at as *mut __m256i, packed);
+                } else {
+                    _mm256_mask_storeu_epi32(at as *mut i32, ((1u16 << count) - 1) as u8, packed);
+                }
+                kept += count;
             }
             k += 8;
         }
