@@ -1,15 +1,18 @@
-//! The momentum and continuity sums of [`crate::forces`] eight neighbours at a time
-//! with AVX-512, for the Wendland kernel (every shipped scenario's):
+//! The momentum and continuity sums of [`crate::forces`] and the Shepard filter of
+//! [`crate::reinitialise`] eight neighbours at a time, for the Wendland kernel (every
+//! shipped scenario's), with AVX-512 or, on processors without it, AVX2:
 //!   dv_i/dt   = - sum_j m_j (p_i/rho_i^2 + p_j/rho_j^2 + Pi_ij + R f_ij^n) grad_i W_ij
 //!   drho_i/dt =   sum_j m_j v_ij . grad_i W_ij
+//!   rho_i     =   sum_j m_j W_ij / sum_j (m_j/rho_j) W_ij
 //!
 //! Each lane does the scalar loop's arithmetic for one neighbour, operation for
 //! operation (no fused multiply-add), so a pair's terms are the scalar ones; only the
-//! order of the additions differs: lane l sums neighbours l, l + 8, ..., and the lanes
-//! are added at the end. Results therefore differ from the scalar path by round-off,
-//! but do not depend on the thread count (the order is fixed by the neighbour list).
-//! The eight fields of a neighbour's [`Packed`] record are read with gathers; unused
-//! lanes of the last group read a padding particle of zero mass beyond the support.
+//! order of the additions differs: lane l sums neighbours l, l + 8, ..., and the eight
+//! lanes are added in a fixed tree at the end. Results therefore differ from the
+//! scalar path by round-off, but are the same for any thread count and on AVX2 and
+//! AVX-512 processors alike (one lane algebra, [`x86::Lanes`], two implementations).
+//! The fields of a neighbour's [`Packed`] record are read with gathers; unused lanes
+//! of the last group read a padding particle of zero mass beyond the support.
 
 use crate::forces::{Pair, Sums};
 use crate::packed::Packed;
@@ -17,9 +20,48 @@ use glam::DVec2;
 use sph_core::kernel::KernelKind;
 use std::f64::consts::PI;
 
-/// The Wendland C2 kernel's constants, as `sph_core::kernel::Wendland` computes them.
+/// The instruction set of the eight-lane sums.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Isa {
+    /// One 512-bit vector per quantity.
+    Avx512,
+    /// Two 256-bit vectors per quantity.
+    Avx2,
+}
+
+impl Isa {
+    /// The widest the processor supports; None without AVX2 or with `SPH_NO_SIMD` set.
+    /// `SPH_SIMD=avx2` keeps to AVX2 on an AVX-512 processor (to measure that path).
+    pub fn detect() -> Option<Self> {
+        #[cfg(target_arch = "x86_64")]
+        if crate::scan::simd_allowed() {
+            use std::arch::is_x86_feature_detected as has;
+            let avx2_only = std::env::var_os("SPH_SIMD").is_some_and(|v| v == "avx2");
+            if has!("avx512f") && has!("avx512vl") && !avx2_only {
+                return Some(Isa::Avx512);
+            }
+            if has!("avx2") {
+                return Some(Isa::Avx2);
+            }
+        }
+        None
+    }
+
+    /// Every one this processor can run (for tests comparing them).
+    pub fn available() -> Vec<Self> {
+        match Self::detect() {
+            Some(Isa::Avx512) => vec![Isa::Avx512, Isa::Avx2],
+            Some(Isa::Avx2) => vec![Isa::Avx2],
+            None => vec![],
+        }
+    }
+}
+
+/// The Wendland C2 kernel's constants, as `sph_core::kernel::Wendland` computes them,
+/// and the instruction set to sum with.
 #[derive(Clone, Copy, Debug)]
 pub struct WendlandX8 {
+    isa: Isa,
     inv_h: f64,
     /// 7 / (4 pi h^2).
     norm: f64,
@@ -30,19 +72,26 @@ pub struct WendlandX8 {
 
 impl WendlandX8 {
     /// The eight-lane sums for this kernel and smoothing length, where the processor
-    /// has AVX-512F and VL; None for other kernels or processors, or with
+    /// has AVX2 or AVX-512; None for other kernels or processors, or with
     /// `SPH_NO_SIMD` set (use the scalar loop).
     pub fn detect(kernel: KernelKind, h: f64) -> Option<Self> {
-        if kernel != KernelKind::Wendland || !available() {
+        if kernel != KernelKind::Wendland {
             return None;
         }
+        Isa::detect().map(|isa| Self::with_isa(isa, h))
+    }
+
+    /// The sums with a given instruction set, which the processor must have (see
+    /// [`Isa::available`]).
+    pub fn with_isa(isa: Isa, h: f64) -> Self {
         let (inv_h, norm) = (1.0 / h, 7.0 / (4.0 * PI) / (h * h));
-        Some(Self {
+        Self {
+            isa,
             inv_h,
             norm,
             grad_norm: norm * inv_h * inv_h,
             support: 2.0 * h,
-        })
+        }
     }
 
     /// The sums of particle `i` over `neighbours` (joint indices into `all`): the
@@ -56,21 +105,20 @@ impl WendlandX8 {
         neighbours: &[u32],
         i: usize,
     ) -> Sums {
+        check(all, neighbours);
         #[cfg(target_arch = "x86_64")]
-        {
-            assert!(all.len() < (i32::MAX / 8) as usize);
-            // SAFETY: `detect` found AVX-512F and VL; every index in `neighbours` is a joint
-            // index of the particles `all` was packed from (NeighbourGrid builds them
-            // from the same world in the same step), checked below in debug builds.
-            debug_assert!(neighbours.iter().all(|&j| (j as usize) < all.len()));
-            unsafe { x86::sums::<FORCES, ART, RATE>(self, prm, all, neighbours, i) }
+        // SAFETY: the instruction set was found on this processor (`Isa::detect`), and
+        // `check` holds: every index in `neighbours` is below `all.len()`.
+        unsafe {
+            match self.isa {
+                Isa::Avx512 => x86::sums_avx512::<FORCES, ART, RATE>(self, prm, all, neighbours, i),
+                Isa::Avx2 => x86::sums_avx2::<FORCES, ART, RATE>(self, prm, all, neighbours, i),
+            }
         }
         #[cfg(not(target_arch = "x86_64"))]
-        unreachable!("WendlandX8::detect returns None off x86-64")
+        unreachable!("no instruction set is detected off x86-64")
     }
-}
 
-impl WendlandX8 {
     /// The continuity equation's sum_j m_j v_ij . grad_i W_ij alone, term for term as
     /// `sums` evaluates it with `RATE` (so a separate `Continuity()` stage and
     /// `Forces(with_continuity: true)` agree bit for bit).
@@ -95,29 +143,31 @@ impl WendlandX8 {
     /// and `neighbours`.
     #[inline]
     pub fn shepard(&self, all: &[Packed], neighbours: &[u32], i: usize) -> f64 {
+        check(all, neighbours);
         #[cfg(target_arch = "x86_64")]
-        {
-            assert!(all.len() < (i32::MAX / 8) as usize);
-            debug_assert!(neighbours.iter().all(|&j| (j as usize) < all.len()));
-            // SAFETY: as for `sums`.
-            unsafe { x86::shepard(self, all, neighbours, i) }
+        // SAFETY: as in `sums`.
+        unsafe {
+            match self.isa {
+                Isa::Avx512 => x86::shepard_avx512(self, all, neighbours, i),
+                Isa::Avx2 => x86::shepard_avx2(self, all, neighbours, i),
+            }
         }
         #[cfg(not(target_arch = "x86_64"))]
-        unreachable!("WendlandX8::detect returns None off x86-64")
+        unreachable!("no instruction set is detected off x86-64")
     }
 }
 
-fn available() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    return crate::scan::simd_allowed()
-        && std::arch::is_x86_feature_detected!("avx512f")
-        && std::arch::is_x86_feature_detected!("avx512vl");
-    #[cfg(not(target_arch = "x86_64"))]
-    false
+/// What the gathers rely on: record offsets fit an i32, and (checked in debug builds;
+/// NeighbourGrid builds the lists from the same particles in the same step) every
+/// neighbour is a particle of `all`.
+#[inline(always)]
+fn check(all: &[Packed], neighbours: &[u32]) {
+    assert!(all.len() < (i32::MAX / 8) as usize);
+    debug_assert!(neighbours.iter().all(|&j| (j as usize) < all.len()));
 }
 
 #[cfg(target_arch = "x86_64")]
-mod x86 {
+pub(crate) mod x86 {
     use super::*;
     use std::arch::x86_64::*;
 
@@ -132,47 +182,273 @@ mod x86 {
     const C: usize = 7;
     const _: () = assert!(std::mem::size_of::<Packed>() == 8 * 8);
 
+    /// Eight f64 lanes and the operations the sums need. Every method is
+    /// `#[inline(always)]` and is only called from functions compiled with the
+    /// implementation's target features, where its intrinsics inline.
+    ///
+    /// # Safety
+    /// Callers must run on a processor with the implementation's features.
+    pub(crate) trait Lanes: Copy {
+        type Mask: Copy;
+        /// The lanes in use for a group of `js` (the first `js.len()` of eight), with
+        /// the record offsets of `js`.
+        type Index: Copy;
+        unsafe fn splat(x: f64) -> Self;
+        unsafe fn add(self, b: Self) -> Self;
+        unsafe fn sub(self, b: Self) -> Self;
+        unsafe fn mul(self, b: Self) -> Self;
+        unsafe fn div(self, b: Self) -> Self;
+        unsafe fn sqrt(self) -> Self;
+        unsafe fn max(self, b: Self) -> Self;
+        /// Lanes where self < b (ordered, quiet).
+        unsafe fn lt(self, b: Self) -> Self::Mask;
+        unsafe fn and(a: Self::Mask, b: Self::Mask) -> Self::Mask;
+        /// self where `m`, else 0.
+        unsafe fn keep(self, m: Self::Mask) -> Self;
+        /// `yes` where `m`, else `no`.
+        unsafe fn select(m: Self::Mask, yes: Self, no: Self) -> Self;
+        /// # Safety
+        /// `js.len()` is 1 to 8.
+        unsafe fn index(js: &[u32]) -> Self::Index;
+        /// Field `field` of the records of `index` (f64s from `base`), `pad` elsewhere.
+        ///
+        /// # Safety
+        /// Every record of `index` lies within the buffer at `base`.
+        unsafe fn gather(index: Self::Index, base: *const f64, field: usize, pad: f64) -> Self;
+        unsafe fn to_array(self) -> [f64; 8];
+    }
+
+    /// The sum of the lanes in a fixed order (the same for every implementation).
+    #[inline(always)]
+    unsafe fn reduce<V: Lanes>(v: V) -> f64 {
+        let a = unsafe { v.to_array() };
+        ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]))
+    }
+
+    #[derive(Clone, Copy)]
+    pub(crate) struct Avx512(__m512d);
+
+    impl Lanes for Avx512 {
+        type Mask = __mmask8;
+        type Index = (__m256i, __mmask8);
+        #[inline(always)]
+        unsafe fn splat(x: f64) -> Self {
+            Self(_mm512_set1_pd(x))
+        }
+        #[inline(always)]
+        unsafe fn add(self, b: Self) -> Self {
+            Self(_mm512_add_pd(self.0, b.0))
+        }
+        #[inline(always)]
+        unsafe fn sub(self, b: Self) -> Self {
+            Self(_mm512_sub_pd(self.0, b.0))
+        }
+        #[inline(always)]
+        unsafe fn mul(self, b: Self) -> Self {
+            Self(_mm512_mul_pd(self.0, b.0))
+        }
+        #[inline(always)]
+        unsafe fn div(self, b: Self) -> Self {
+            Self(_mm512_div_pd(self.0, b.0))
+        }
+        #[inline(always)]
+        unsafe fn sqrt(self) -> Self {
+            Self(_mm512_sqrt_pd(self.0))
+        }
+        #[inline(always)]
+        unsafe fn max(self, b: Self) -> Self {
+            Self(_mm512_max_pd(self.0, b.0))
+        }
+        #[inline(always)]
+        unsafe fn lt(self, b: Self) -> __mmask8 {
+            _mm512_cmp_pd_mask::<_CMP_LT_OQ>(self.0, b.0)
+        }
+        #[inline(always)]
+        unsafe fn and(a: __mmask8, b: __mmask8) -> __mmask8 {
+            a & b
+        }
+        #[inline(always)]
+        unsafe fn keep(self, m: __mmask8) -> Self {
+            Self(_mm512_maskz_mov_pd(m, self.0))
+        }
+        #[inline(always)]
+        unsafe fn select(m: __mmask8, yes: Self, no: Self) -> Self {
+            Self(_mm512_mask_blend_pd(m, no.0, yes.0))
+        }
+        #[inline(always)]
+        unsafe fn index(js: &[u32]) -> Self::Index {
+            let lanes = ((1u16 << js.len()) - 1) as u8;
+            // SAFETY: the masked load reads js[..js.len()] only.
+            let j = unsafe { _mm256_maskz_loadu_epi32(lanes, js.as_ptr() as *const i32) };
+            (_mm256_slli_epi32::<3>(j), lanes)
+        }
+        #[inline(always)]
+        unsafe fn gather(index: Self::Index, base: *const f64, field: usize, pad: f64) -> Self {
+            let (offsets, lanes) = index;
+            let src = _mm512_set1_pd(pad);
+            Self(unsafe { _mm512_mask_i32gather_pd::<8>(src, lanes, offsets, base.add(field)) })
+        }
+        #[inline(always)]
+        unsafe fn to_array(self) -> [f64; 8] {
+            let mut a = [0.0; 8];
+            unsafe { _mm512_storeu_pd(a.as_mut_ptr(), self.0) };
+            a
+        }
+    }
+
+    /// Lanes 0-3 and 4-7.
+    #[derive(Clone, Copy)]
+    pub(crate) struct Avx2([__m256d; 2]);
+
+    impl Avx2 {
+        #[inline(always)]
+        unsafe fn each(self, b: Self, f: impl Fn(__m256d, __m256d) -> __m256d) -> Self {
+            Self([f(self.0[0], b.0[0]), f(self.0[1], b.0[1])])
+        }
+    }
+
+    impl Lanes for Avx2 {
+        /// All ones in the lanes that are set.
+        type Mask = [__m256d; 2];
+        /// Record offsets, and the lanes in use as a mask.
+        type Index = ([__m128i; 2], [__m256d; 2]);
+        #[inline(always)]
+        unsafe fn splat(x: f64) -> Self {
+            Self([_mm256_set1_pd(x); 2])
+        }
+        #[inline(always)]
+        unsafe fn add(self, b: Self) -> Self {
+            unsafe { self.each(b, |x, y| _mm256_add_pd(x, y)) }
+        }
+        #[inline(always)]
+        unsafe fn sub(self, b: Self) -> Self {
+            unsafe { self.each(b, |x, y| _mm256_sub_pd(x, y)) }
+        }
+        #[inline(always)]
+        unsafe fn mul(self, b: Self) -> Self {
+            unsafe { self.each(b, |x, y| _mm256_mul_pd(x, y)) }
+        }
+        #[inline(always)]
+        unsafe fn div(self, b: Self) -> Self {
+            unsafe { self.each(b, |x, y| _mm256_div_pd(x, y)) }
+        }
+        #[inline(always)]
+        unsafe fn sqrt(self) -> Self {
+            Self([_mm256_sqrt_pd(self.0[0]), _mm256_sqrt_pd(self.0[1])])
+        }
+        #[inline(always)]
+        unsafe fn max(self, b: Self) -> Self {
+            unsafe { self.each(b, |x, y| _mm256_max_pd(x, y)) }
+        }
+        #[inline(always)]
+        unsafe fn lt(self, b: Self) -> Self::Mask {
+            unsafe { self.each(b, |x, y| _mm256_cmp_pd::<_CMP_LT_OQ>(x, y)) }.0
+        }
+        #[inline(always)]
+        unsafe fn and(a: Self::Mask, b: Self::Mask) -> Self::Mask {
+            unsafe { Self(a).each(Self(b), |x, y| _mm256_and_pd(x, y)) }.0
+        }
+        #[inline(always)]
+        unsafe fn keep(self, m: Self::Mask) -> Self {
+            unsafe { Self(m).each(self, |m, x| _mm256_and_pd(m, x)) }
+        }
+        #[inline(always)]
+        unsafe fn select(m: Self::Mask, yes: Self, no: Self) -> Self {
+            Self([
+                _mm256_blendv_pd(no.0[0], yes.0[0], m[0]),
+                _mm256_blendv_pd(no.0[1], yes.0[1], m[1]),
+            ])
+        }
+        #[inline(always)]
+        unsafe fn index(js: &[u32]) -> Self::Index {
+            // Unused lanes gather nothing (masked off); their offset 0 is never read.
+            let mut j = [0i32; 8];
+            for (o, &x) in j.iter_mut().zip(js) {
+                *o = (x as i32) << 3;
+            }
+            let used = |l: usize| if l < js.len() { -1i64 } else { 0 };
+            let lanes = |l: usize| {
+                _mm256_castsi256_pd(_mm256_set_epi64x(
+                    used(l + 3),
+                    used(l + 2),
+                    used(l + 1),
+                    used(l),
+                ))
+            };
+            // SAFETY: reads of the local array.
+            let (lo, hi) = unsafe {
+                (
+                    _mm_loadu_si128(j.as_ptr() as *const __m128i),
+                    _mm_loadu_si128(j.as_ptr().add(4) as *const __m128i),
+                )
+            };
+            ([lo, hi], [lanes(0), lanes(4)])
+        }
+        #[inline(always)]
+        unsafe fn gather(index: Self::Index, base: *const f64, field: usize, pad: f64) -> Self {
+            let (offsets, lanes) = index;
+            let src = _mm256_set1_pd(pad);
+            // SAFETY: the caller's contract; masked-off lanes are not read.
+            unsafe {
+                let p = base.add(field);
+                Self([
+                    _mm256_mask_i32gather_pd::<8>(src, p, offsets[0], lanes[0]),
+                    _mm256_mask_i32gather_pd::<8>(src, p, offsets[1], lanes[1]),
+                ])
+            }
+        }
+        #[inline(always)]
+        unsafe fn to_array(self) -> [f64; 8] {
+            let mut a = [0.0; 8];
+            unsafe {
+                _mm256_storeu_pd(a.as_mut_ptr(), self.0[0]);
+                _mm256_storeu_pd(a.as_mut_ptr().add(4), self.0[1]);
+            }
+            a
+        }
+    }
+
     /// x^n with the multiplications of `sph_core::sim::whole_pow`, lane by lane.
-    #[target_feature(enable = "avx512f")]
-    fn whole_pow(x: __m512d, n: u32) -> __m512d {
-        let mul = |a, b| _mm512_mul_pd(a, b);
-        match n {
-            4 => {
-                let x2 = mul(x, x);
-                mul(x2, x2)
-            }
-            6 => {
-                let x3 = mul(mul(x, x), x);
-                mul(x3, x3)
-            }
-            7 => {
-                let x3 = mul(mul(x, x), x);
-                mul(mul(x3, x3), x)
-            }
-            _ => {
-                let (mut base, mut e, mut out) = (x, n, _mm512_set1_pd(1.0));
-                while e > 0 {
-                    if e & 1 == 1 {
-                        out = mul(out, base);
-                    }
-                    base = mul(base, base);
-                    e >>= 1;
+    #[inline(always)]
+    unsafe fn whole_pow<V: Lanes>(x: V, n: u32) -> V {
+        unsafe {
+            match n {
+                4 => {
+                    let x2 = x.mul(x);
+                    x2.mul(x2)
                 }
-                out
+                6 => {
+                    let x3 = x.mul(x).mul(x);
+                    x3.mul(x3)
+                }
+                7 => {
+                    let x3 = x.mul(x).mul(x);
+                    x3.mul(x3).mul(x)
+                }
+                _ => {
+                    let (mut base, mut e, mut out) = (x, n, V::splat(1.0));
+                    while e > 0 {
+                        if e & 1 == 1 {
+                            out = out.mul(base);
+                        }
+                        base = base.mul(base);
+                        e >>= 1;
+                    }
+                    out
+                }
             }
         }
     }
 
-    /// W(r) of the Wendland C2 kernel, lane by lane, with q = r/h:
-    /// norm t^4 (2q + 1), t = 1 - q/2, and 0 from q = 2 on.
-    #[target_feature(enable = "avx512f")]
-    #[inline]
-    fn w(k: &WendlandX8, q: __m512d, t: __m512d) -> __m512d {
-        let (set, mul) = (_mm512_set1_pd, _mm512_mul_pd);
-        let t2 = mul(t, t);
-        let inside = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(q, set(2.0));
-        let poly = mul(mul(t2, t2), _mm512_add_pd(mul(set(2.0), q), set(1.0)));
-        _mm512_maskz_mov_pd(inside, mul(set(k.norm), poly))
+    /// W(r) of the Wendland C2 kernel with q = r/h and t = 1 - q/2:
+    /// norm t^4 (2q + 1), and 0 from q = 2 on.
+    #[inline(always)]
+    unsafe fn w<V: Lanes>(k: &WendlandX8, q: V, t: V) -> V {
+        unsafe {
+            let t2 = t.mul(t);
+            let poly = t2.mul(t2).mul(V::splat(2.0).mul(q).add(V::splat(1.0)));
+            V::splat(k.norm).mul(poly).keep(q.lt(V::splat(2.0)))
+        }
     }
 
     /// The padding record of particle `me`'s sums: zero mass, beyond the support, at
@@ -188,74 +464,49 @@ mod x86 {
         [p.x.x, p.x.y, p.v.x, p.v.y, p.rho, p.m, p.p_rho2, p.c]
     }
 
+    /// See [`WendlandX8::shepard`].
+    ///
     /// # Safety
-    /// AVX-512F and VL, and every index in `neighbours` below `all.len()`.
-    #[target_feature(enable = "avx512f,avx512vl")]
-    pub(super) unsafe fn shepard(
+    /// `V`'s features, and every index in `neighbours` below `all.len()`.
+    #[inline(always)]
+    unsafe fn shepard<V: Lanes>(
         k: &WendlandX8,
         all: &[Packed],
         neighbours: &[u32],
         i: usize,
     ) -> f64 {
         let me = all[i];
-        let (set, sub, mul) = (_mm512_set1_pd, _mm512_sub_pd, _mm512_mul_pd);
         let pad = padding(k, &me);
         let base = all.as_ptr() as *const f64;
-        let (xi, yi) = (set(me.x.x), set(me.x.y));
-        let (mut num, mut den) = (_mm512_setzero_pd(), _mm512_setzero_pd());
-        for js in neighbours.chunks(8) {
-            let lanes: __mmask8 = ((1u16 << js.len()) - 1) as u8;
-            // SAFETY: as in `sums`.
-            let offsets = unsafe { offsets(js, lanes) };
-            let g = |field: usize| unsafe { gather(&pad, base, offsets, lanes, field) };
-            let (dx, dy) = (sub(xi, g(X)), sub(yi, g(Y)));
-            let r = _mm512_sqrt_pd(_mm512_add_pd(mul(dx, dx), mul(dy, dy)));
-            let q = mul(r, set(k.inv_h));
-            let w = w(k, q, sub(set(1.0), mul(set(0.5), q)));
-            let mj = g(M);
-            num = _mm512_add_pd(num, mul(mj, w));
-            den = _mm512_add_pd(den, mul(_mm512_div_pd(mj, g(RHO)), w));
+        unsafe {
+            let s = V::splat;
+            let (xi, yi) = (s(me.x.x), s(me.x.y));
+            let (mut num, mut den) = (s(0.0), s(0.0));
+            for js in neighbours.chunks(8) {
+                let index = V::index(js);
+                let g = |field: usize| V::gather(index, base, field, pad[field]);
+                let (dx, dy) = (xi.sub(g(X)), yi.sub(g(Y)));
+                let r = dx.mul(dx).add(dy.mul(dy)).sqrt();
+                let q = r.mul(s(k.inv_h));
+                let w = w(k, q, s(1.0).sub(s(0.5).mul(q)));
+                let mj = g(M);
+                num = num.add(mj.mul(w));
+                den = den.add(mj.div(g(RHO)).mul(w));
+            }
+            // i itself: W(0) = norm.
+            let w0 = k.norm;
+            let num = me.m * w0 + reduce(num);
+            let den = me.m / me.rho * w0 + reduce(den);
+            num / den
         }
-        // i itself: W(0) = norm.
-        let w0 = k.norm;
-        let num = me.m * w0 + _mm512_reduce_add_pd(num);
-        let den = me.m / me.rho * w0 + _mm512_reduce_add_pd(den);
-        num / den
     }
 
-    /// Offsets (in f64s) of the records of `js`, in the lanes `lanes`.
+    /// See [`WendlandX8::sums`].
     ///
     /// # Safety
-    /// `lanes` covers at most `js.len()` lanes.
-    #[target_feature(enable = "avx512f,avx512vl")]
-    #[inline]
-    unsafe fn offsets(js: &[u32], lanes: __mmask8) -> __m256i {
-        let j = unsafe { _mm256_maskz_loadu_epi32(lanes, js.as_ptr() as *const i32) };
-        _mm256_slli_epi32::<3>(j)
-    }
-
-    /// Field `field` of the records at `offsets` (f64s from `base`) in `lanes`, and
-    /// the padding record's in the others.
-    ///
-    /// # Safety
-    /// Every offset in `lanes` addresses a record within the packed buffer at `base`.
-    #[target_feature(enable = "avx512f")]
-    #[inline]
-    unsafe fn gather(
-        pad: &[f64; 8],
-        base: *const f64,
-        offsets: __m256i,
-        lanes: __mmask8,
-        field: usize,
-    ) -> __m512d {
-        let src = _mm512_set1_pd(pad[field]);
-        unsafe { _mm512_mask_i32gather_pd::<8>(src, lanes, offsets, base.add(field)) }
-    }
-
-    /// # Safety
-    /// AVX-512F and VL, and every index in `neighbours` below `all.len()`.
-    #[target_feature(enable = "avx512f,avx512vl")]
-    pub(super) unsafe fn sums<const FORCES: bool, const ART: bool, const RATE: bool>(
+    /// `V`'s features, and every index in `neighbours` below `all.len()`.
+    #[inline(always)]
+    unsafe fn sums<V: Lanes, const FORCES: bool, const ART: bool, const RATE: bool>(
         k: &WendlandX8,
         prm: &Pair,
         all: &[Packed],
@@ -263,83 +514,104 @@ mod x86 {
         i: usize,
     ) -> Sums {
         let me = all[i];
-        let set = _mm512_set1_pd;
-        let (add, sub, mul, div) = (_mm512_add_pd, _mm512_sub_pd, _mm512_mul_pd, _mm512_div_pd);
         let pad = padding(k, &me);
         let base = all.as_ptr() as *const f64;
-        let (xi, yi, vxi, vyi) = (set(me.x.x), set(me.x.y), set(me.v.x), set(me.v.y));
-        let (rhoi, pi_r2, ci) = (set(me.rho), set(me.p_rho2), set(me.c));
-        let zero = _mm512_setzero_pd();
-        let (mut ax, mut ay, mut power, mut rate) = (zero, zero, zero, zero);
-        for js in neighbours.chunks(8) {
-            let lanes: __mmask8 = ((1u16 << js.len()) - 1) as u8;
-            // SAFETY: the masked load reads js[..js.len()]; the gathers read fields of
-            // the records all[j] for those j (below all.len() by the caller's
-            // contract), and nothing for the masked-off lanes.
-            let offsets = unsafe { offsets(js, lanes) };
-            let g = |field: usize| unsafe { gather(&pad, base, offsets, lanes, field) };
-            let (xj, yj, vxj, vyj) = (g(X), g(Y), g(VX), g(VY));
-            let (rhoj, mj) = (g(RHO), g(M));
-            let (dx, dy) = (sub(xi, xj), sub(yi, yj));
-            let r = _mm512_sqrt_pd(add(mul(dx, dx), mul(dy, dy)));
-            // Wendland C2: t = 1 - q/2, W = norm t^4 (2q + 1), (dW/dr)/r = norm/h^2 (-5 t^3),
-            // both zero from q = 2 on; grad W = 0 at r = 0.
-            let q = mul(r, set(k.inv_h));
-            let t = sub(set(1.0), mul(set(0.5), q));
-            let t2 = mul(t, t);
-            let inside = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(q, set(2.0));
-            let positive = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(r, zero);
-            let gf = mul(set(k.grad_norm), mul(set(-5.0), mul(t2, t)));
-            let gf = _mm512_maskz_mov_pd(inside & positive, gf);
-            let (gx, gy) = (mul(dx, gf), mul(dy, gf));
-            let (wx, wy) = (sub(vxi, vxj), sub(vyi, vyj));
-            let vij_grad = add(mul(wx, gx), mul(wy, gy));
-            if RATE {
-                rate = add(rate, mul(mj, vij_grad));
+        unsafe {
+            let s = V::splat;
+            let (xi, yi, vxi, vyi) = (s(me.x.x), s(me.x.y), s(me.v.x), s(me.v.y));
+            let (rhoi, pi_r2, ci) = (s(me.rho), s(me.p_rho2), s(me.c));
+            let zero = s(0.0);
+            let (mut ax, mut ay, mut power, mut rate) = (zero, zero, zero, zero);
+            for js in neighbours.chunks(8) {
+                let index = V::index(js);
+                let g = |field: usize| V::gather(index, base, field, pad[field]);
+                let (dx, dy) = (xi.sub(g(X)), yi.sub(g(Y)));
+                let r = dx.mul(dx).add(dy.mul(dy)).sqrt();
+                // Wendland C2: (dW/dr)/r = norm/h^2 (-5 t^3), zero from q = 2 on and
+                // at r = 0 (grad W = 0 there).
+                let q = r.mul(s(k.inv_h));
+                let t = s(1.0).sub(s(0.5).mul(q));
+                let inside = V::and(q.lt(s(2.0)), zero.lt(r));
+                let gf = s(k.grad_norm)
+                    .mul(s(-5.0).mul(t.mul(t).mul(t)))
+                    .keep(inside);
+                let (gx, gy) = (dx.mul(gf), dy.mul(gf));
+                let (wx, wy) = (vxi.sub(g(VX)), vyi.sub(g(VY)));
+                let vij_grad = wx.mul(gx).add(wy.mul(gy));
+                let mj = g(M);
+                if RATE {
+                    rate = rate.add(mj.mul(vij_grad));
+                }
+                if !FORCES {
+                    continue;
+                }
+                let (pj_r2, cj, rhoj) = (g(P_RHO2), g(C), g(RHO));
+                let mut term = pi_r2.add(pj_r2);
+                // Monaghan's artificial viscosity, for approaching pairs (v_ij . x_ij < 0).
+                let vx = wx.mul(dx).add(wy.mul(dy));
+                let phi = s(prm.h).mul(vx).div(r.mul(r).add(s(prm.eta2)));
+                let cbar = s(0.5).mul(ci.add(cj));
+                let num = s(-prm.alpha)
+                    .mul(cbar)
+                    .mul(phi)
+                    .add(s(prm.beta).mul(phi).mul(phi));
+                let visc = num.div(s(0.5).mul(rhoi.add(rhoj))).keep(vx.lt(zero));
+                term = term.add(visc);
+                if ART {
+                    // R = eps (|p_i|/rho_i^2 + |p_j|/rho_j^2) over the negative
+                    // pressures, or eps_+ (p_i/rho_i^2 + p_j/rho_j^2) when both are
+                    // positive; f_ij = (W/W(ds))^n.
+                    let fij = whole_pow(w(k, q, t).mul(s(prm.inv_w_ds)), prm.exponent);
+                    let both_positive = V::and(zero.lt(pi_r2), zero.lt(pj_r2));
+                    let tension = s(prm.epsilon)
+                        .mul(zero.sub(pi_r2).max(zero).add(zero.sub(pj_r2).max(zero)));
+                    let compression = s(prm.epsilon_positive).mul(pi_r2.add(pj_r2));
+                    term = term.add(V::select(both_positive, compression, tension).mul(fij));
+                }
+                let mt = mj.mul(term);
+                ax = ax.sub(mt.mul(gx));
+                ay = ay.sub(mt.mul(gy));
+                power = power.add(mj.mul(visc).mul(vij_grad));
             }
-            if !FORCES {
-                continue;
+            Sums {
+                acc: DVec2::new(reduce(ax), reduce(ay)),
+                visc_power: reduce(power),
+                rate: reduce(rate),
             }
-            let (pj_r2, cj) = (g(P_RHO2), g(C));
-            let mut term = add(pi_r2, pj_r2);
-            // Monaghan's artificial viscosity, for approaching pairs (v_ij . x_ij < 0).
-            let vx = add(mul(wx, dx), mul(wy, dy));
-            let phi = div(mul(set(prm.h), vx), add(mul(r, r), set(prm.eta2)));
-            let cbar = mul(set(0.5), add(ci, cj));
-            let num = add(
-                mul(mul(set(-prm.alpha), cbar), phi),
-                mul(mul(set(prm.beta), phi), phi),
-            );
-            let pi = div(num, mul(set(0.5), add(rhoi, rhoj)));
-            let approaching = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(vx, zero);
-            let visc = _mm512_maskz_mov_pd(approaching, pi);
-            term = add(term, visc);
-            if ART {
-                let fij = whole_pow(mul(w(k, q, t), set(prm.inv_w_ds)), prm.exponent);
-                let both_positive = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(pi_r2, zero)
-                    & _mm512_cmp_pd_mask::<_CMP_GT_OQ>(pj_r2, zero);
-                let tension = mul(
-                    set(prm.epsilon),
-                    add(
-                        _mm512_max_pd(sub(zero, pi_r2), zero),
-                        _mm512_max_pd(sub(zero, pj_r2), zero),
-                    ),
-                );
-                let compression = mul(set(prm.epsilon_positive), add(pi_r2, pj_r2));
-                let big_r = _mm512_mask_blend_pd(both_positive, tension, compression);
-                term = add(term, mul(big_r, fij));
-            }
-            let mt = mul(mj, term);
-            ax = sub(ax, mul(mt, gx));
-            ay = sub(ay, mul(mt, gy));
-            power = add(power, mul(mul(mj, visc), vij_grad));
-        }
-        Sums {
-            acc: DVec2::new(_mm512_reduce_add_pd(ax), _mm512_reduce_add_pd(ay)),
-            visc_power: _mm512_reduce_add_pd(power),
-            rate: _mm512_reduce_add_pd(rate),
         }
     }
+
+    /// The entry points, one per instruction set, each compiled with its features.
+    macro_rules! compiled_for {
+        ($features:literal, $lanes:ty, $sums:ident, $shepard:ident) => {
+            /// # Safety
+            /// The processor has the features; every neighbour index is below `all.len()`.
+            #[target_feature(enable = $features)]
+            pub(super) unsafe fn $sums<const FORCES: bool, const ART: bool, const RATE: bool>(
+                k: &WendlandX8,
+                prm: &Pair,
+                all: &[Packed],
+                neighbours: &[u32],
+                i: usize,
+            ) -> Sums {
+                unsafe { sums::<$lanes, FORCES, ART, RATE>(k, prm, all, neighbours, i) }
+            }
+
+            /// # Safety
+            /// As for the sums.
+            #[target_feature(enable = $features)]
+            pub(super) unsafe fn $shepard(
+                k: &WendlandX8,
+                all: &[Packed],
+                neighbours: &[u32],
+                i: usize,
+            ) -> f64 {
+                unsafe { shepard::<$lanes>(k, all, neighbours, i) }
+            }
+        };
+    }
+    compiled_for!("avx512f,avx512vl", Avx512, sums_avx512, shepard_avx512);
+    compiled_for!("avx2", Avx2, sums_avx2, shepard_avx2);
 }
 
 #[cfg(test)]
@@ -388,10 +660,56 @@ mod tests {
     /// above double round-off over ~20 terms, far below any physical effect).
     #[test]
     fn eight_lanes_match_the_scalar_sums() {
-        let Some(x8) = WendlandX8::detect(KernelKind::Wendland, 0.013) else {
-            eprintln!("no AVX-512 here (or SPH_NO_SIMD set): nothing to compare");
+        if Isa::available().is_empty() {
+            eprintln!("no AVX2 here (or SPH_NO_SIMD set): nothing to compare");
+        }
+        for isa in Isa::available() {
+            compare_with_scalar(WendlandX8::with_isa(isa, 0.013));
+        }
+    }
+
+    /// AVX2 and AVX-512 give the same numbers, bit for bit.
+    #[test]
+    fn every_instruction_set_gives_the_same_bits() {
+        let all_isa = Isa::available();
+        if all_isa.len() < 2 {
+            eprintln!("fewer than two instruction sets here: nothing to compare");
             return;
-        };
+        }
+        for seed in 0..50 {
+            let (all, near, i, h) = cloud(seed);
+            let prm = Pair::new(
+                &Params {
+                    artificial_pressure: true,
+                    beta: 0.1,
+                    ..Params::default()
+                },
+                Wendland::new(h).w(0.01),
+                h,
+            );
+            let results: Vec<[f64; 5]> = all_isa
+                .iter()
+                .map(|&isa| {
+                    let x8 = WendlandX8::with_isa(isa, h);
+                    let a = x8.sums::<true, true, true>(&prm, &all, &near, i);
+                    let shepard = x8.shepard(&all, &near, i);
+                    [a.acc.x, a.acc.y, a.rate, a.visc_power, shepard]
+                        .map(f64::to_bits)
+                        .map(f64::from_bits)
+                })
+                .collect();
+            for r in &results[1..] {
+                assert_eq!(
+                    r.map(f64::to_bits),
+                    results[0].map(f64::to_bits),
+                    "seed {seed}: {r:?} vs {:?}",
+                    results[0]
+                );
+            }
+        }
+    }
+
+    fn compare_with_scalar(x8: WendlandX8) {
         let close = |a: f64, b: f64, scale: f64| (a - b).abs() <= 1e-12 * scale;
         for seed in 0..50 {
             let (all, near, i, h) = cloud(seed);
