@@ -225,39 +225,39 @@ pub(crate) mod x86 {
         ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]))
     }
 
+    /// The element-wise arithmetic of a [`Lanes`] type, each operation by the given
+    /// intrinsic through the type's `each`.
+    macro_rules! arithmetic {
+        ($($name:ident => $op:ident),*) => {$(
+            #[inline(always)]
+            unsafe fn $name(self, b: Self) -> Self {
+                unsafe { self.each(b, |x, y| $op(x, y)) }
+            }
+        )*};
+    }
+
     #[derive(Clone, Copy)]
     pub(crate) struct Avx512(__m512d);
+
+    impl Avx512 {
+        #[inline(always)]
+        unsafe fn each(self, b: Self, f: impl Fn(__m512d, __m512d) -> __m512d) -> Self {
+            Self(f(self.0, b.0))
+        }
+    }
 
     impl Lanes for Avx512 {
         type Mask = __mmask8;
         type Index = (__m256i, __mmask8);
+        arithmetic!(add => _mm512_add_pd, sub => _mm512_sub_pd, mul => _mm512_mul_pd,
+                    div => _mm512_div_pd, max => _mm512_max_pd);
         #[inline(always)]
         unsafe fn splat(x: f64) -> Self {
             Self(_mm512_set1_pd(x))
         }
         #[inline(always)]
-        unsafe fn add(self, b: Self) -> Self {
-            Self(_mm512_add_pd(self.0, b.0))
-        }
-        #[inline(always)]
-        unsafe fn sub(self, b: Self) -> Self {
-            Self(_mm512_sub_pd(self.0, b.0))
-        }
-        #[inline(always)]
-        unsafe fn mul(self, b: Self) -> Self {
-            Self(_mm512_mul_pd(self.0, b.0))
-        }
-        #[inline(always)]
-        unsafe fn div(self, b: Self) -> Self {
-            Self(_mm512_div_pd(self.0, b.0))
-        }
-        #[inline(always)]
         unsafe fn sqrt(self) -> Self {
             Self(_mm512_sqrt_pd(self.0))
-        }
-        #[inline(always)]
-        unsafe fn max(self, b: Self) -> Self {
-            Self(_mm512_max_pd(self.0, b.0))
         }
         #[inline(always)]
         unsafe fn lt(self, b: Self) -> __mmask8 {
@@ -312,33 +312,15 @@ pub(crate) mod x86 {
         type Mask = [__m256d; 2];
         /// Record offsets, and the lanes in use as a mask.
         type Index = ([__m128i; 2], [__m256d; 2]);
+        arithmetic!(add => _mm256_add_pd, sub => _mm256_sub_pd, mul => _mm256_mul_pd,
+                    div => _mm256_div_pd, max => _mm256_max_pd);
         #[inline(always)]
         unsafe fn splat(x: f64) -> Self {
             Self([_mm256_set1_pd(x); 2])
         }
         #[inline(always)]
-        unsafe fn add(self, b: Self) -> Self {
-            unsafe { self.each(b, |x, y| _mm256_add_pd(x, y)) }
-        }
-        #[inline(always)]
-        unsafe fn sub(self, b: Self) -> Self {
-            unsafe { self.each(b, |x, y| _mm256_sub_pd(x, y)) }
-        }
-        #[inline(always)]
-        unsafe fn mul(self, b: Self) -> Self {
-            unsafe { self.each(b, |x, y| _mm256_mul_pd(x, y)) }
-        }
-        #[inline(always)]
-        unsafe fn div(self, b: Self) -> Self {
-            unsafe { self.each(b, |x, y| _mm256_div_pd(x, y)) }
-        }
-        #[inline(always)]
         unsafe fn sqrt(self) -> Self {
             Self([_mm256_sqrt_pd(self.0[0]), _mm256_sqrt_pd(self.0[1])])
-        }
-        #[inline(always)]
-        unsafe fn max(self, b: Self) -> Self {
-            unsafe { self.each(b, |x, y| _mm256_max_pd(x, y)) }
         }
         #[inline(always)]
         unsafe fn lt(self, b: Self) -> Self::Mask {
@@ -451,17 +433,79 @@ pub(crate) mod x86 {
         }
     }
 
-    /// The padding record of particle `me`'s sums: zero mass, beyond the support, at
-    /// rest relative to it, as an array of the record's fields.
-    fn padding(k: &WendlandX8, me: &Packed) -> [f64; 8] {
+    /// One group of up to eight neighbours of particle i: the geometry every sum
+    /// needs, and the gather of any other field.
+    struct Group<V: Lanes> {
+        index: V::Index,
+        base: *const f64,
+        /// The padding record (zero mass, beyond the support, at rest relative to i)
+        /// read by the unused lanes.
+        pad: [f64; 8],
+        /// x_ij, y_ij, r_ij, q = r/h and t = 1 - q/2.
+        dx: V,
+        dy: V,
+        r: V,
+        q: V,
+        t: V,
+    }
+
+    impl<V: Lanes> Group<V> {
+        /// Field `field` of the group's records.
+        #[inline(always)]
+        unsafe fn get(&self, field: usize) -> V {
+            // SAFETY: the records of `index` are particles of the buffer at `base`
+            // (the caller's contract of `for_each_group`).
+            unsafe { V::gather(self.index, self.base, field, self.pad[field]) }
+        }
+    }
+
+    /// Calls `f` for each group of eight of particle `i`'s neighbours.
+    ///
+    /// # Safety
+    /// `V`'s features, and every index in `neighbours` below `all.len()`.
+    #[inline(always)]
+    unsafe fn for_each_group<V: Lanes>(
+        k: &WendlandX8,
+        all: &[Packed],
+        neighbours: &[u32],
+        i: usize,
+        mut f: impl FnMut(&Group<V>),
+    ) {
+        let me = all[i];
         let p = Packed {
             x: me.x + DVec2::new(4.0 * k.support, 0.0),
             m: 0.0,
             p_rho2: 0.0,
             c: 0.0,
-            ..*me
+            ..me
         };
-        [p.x.x, p.x.y, p.v.x, p.v.y, p.rho, p.m, p.p_rho2, p.c]
+        let pad = [p.x.x, p.x.y, p.v.x, p.v.y, p.rho, p.m, p.p_rho2, p.c];
+        let base = all.as_ptr() as *const f64;
+        unsafe {
+            let s = V::splat;
+            let (xi, yi) = (s(me.x.x), s(me.x.y));
+            for js in neighbours.chunks(8) {
+                let index = V::index(js);
+                let (xj, yj) = (
+                    V::gather(index, base, X, pad[X]),
+                    V::gather(index, base, Y, pad[Y]),
+                );
+                let (dx, dy) = (xi.sub(xj), yi.sub(yj));
+                let r = dx.mul(dx).add(dy.mul(dy)).sqrt();
+                let q = r.mul(s(k.inv_h));
+                let t = s(1.0).sub(s(0.5).mul(q));
+                f(&Group {
+                    index,
+                    base,
+                    pad,
+                    dx,
+                    dy,
+                    r,
+                    q,
+                    t,
+                });
+            }
+        }
     }
 
     /// See [`WendlandX8::shepard`].
@@ -476,23 +520,14 @@ pub(crate) mod x86 {
         i: usize,
     ) -> f64 {
         let me = all[i];
-        let pad = padding(k, &me);
-        let base = all.as_ptr() as *const f64;
         unsafe {
-            let s = V::splat;
-            let (xi, yi) = (s(me.x.x), s(me.x.y));
-            let (mut num, mut den) = (s(0.0), s(0.0));
-            for js in neighbours.chunks(8) {
-                let index = V::index(js);
-                let g = |field: usize| V::gather(index, base, field, pad[field]);
-                let (dx, dy) = (xi.sub(g(X)), yi.sub(g(Y)));
-                let r = dx.mul(dx).add(dy.mul(dy)).sqrt();
-                let q = r.mul(s(k.inv_h));
-                let w = w(k, q, s(1.0).sub(s(0.5).mul(q)));
-                let mj = g(M);
+            let (mut num, mut den) = (V::splat(0.0), V::splat(0.0));
+            for_each_group::<V>(k, all, neighbours, i, |g| {
+                let w = w(k, g.q, g.t);
+                let mj = g.get(M);
                 num = num.add(mj.mul(w));
-                den = den.add(mj.div(g(RHO)).mul(w));
-            }
+                den = den.add(mj.div(g.get(RHO)).mul(w));
+            });
             // i itself: W(0) = norm.
             let w0 = k.norm;
             let num = me.m * w0 + reduce(num);
@@ -514,23 +549,19 @@ pub(crate) mod x86 {
         i: usize,
     ) -> Sums {
         let me = all[i];
-        let pad = padding(k, &me);
-        let base = all.as_ptr() as *const f64;
         unsafe {
             let s = V::splat;
-            let (xi, yi, vxi, vyi) = (s(me.x.x), s(me.x.y), s(me.v.x), s(me.v.y));
+            let (vxi, vyi) = (s(me.v.x), s(me.v.y));
             let (rhoi, pi_r2, ci) = (s(me.rho), s(me.p_rho2), s(me.c));
             let zero = s(0.0);
             let (mut ax, mut ay, mut power, mut rate) = (zero, zero, zero, zero);
-            for js in neighbours.chunks(8) {
-                let index = V::index(js);
-                let g = |field: usize| V::gather(index, base, field, pad[field]);
-                let (dx, dy) = (xi.sub(g(X)), yi.sub(g(Y)));
-                let r = dx.mul(dx).add(dy.mul(dy)).sqrt();
+            for_each_group::<V>(k, all, neighbours, i, |grp| {
+                let Group {
+                    dx, dy, r, q, t, ..
+                } = *grp;
+                let g = |field: usize| grp.get(field);
                 // Wendland C2: (dW/dr)/r = norm/h^2 (-5 t^3), zero from q = 2 on and
                 // at r = 0 (grad W = 0 there).
-                let q = r.mul(s(k.inv_h));
-                let t = s(1.0).sub(s(0.5).mul(q));
                 let inside = V::and(q.lt(s(2.0)), zero.lt(r));
                 let gf = s(k.grad_norm)
                     .mul(s(-5.0).mul(t.mul(t).mul(t)))
@@ -543,7 +574,7 @@ pub(crate) mod x86 {
                     rate = rate.add(mj.mul(vij_grad));
                 }
                 if !FORCES {
-                    continue;
+                    return;
                 }
                 let (pj_r2, cj, rhoj) = (g(P_RHO2), g(C), g(RHO));
                 let mut term = pi_r2.add(pj_r2);
@@ -572,7 +603,7 @@ pub(crate) mod x86 {
                 ax = ax.sub(mt.mul(gx));
                 ay = ay.sub(mt.mul(gy));
                 power = power.add(mj.mul(visc).mul(vij_grad));
-            }
+            });
             Sums {
                 acc: DVec2::new(reduce(ax), reduce(ay)),
                 visc_power: reduce(power),
