@@ -10,8 +10,8 @@
 
 use crate::continuity::{require_neighbours, ContinuityInPipeline};
 use crate::neighbour_grid::Neighbours;
-use crate::packed::{round_all, with_packed, Fill, Packed, PackedF32, Precision};
-use crate::pair_x8::{Dispatch, WendlandX8};
+use crate::packed::{with_packed, Fill, Packed};
+use crate::pair_x8::WendlandX8;
 use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -40,11 +40,6 @@ pub struct Params {
     /// Also write the density rate d rho_i/dt = sum_j m_j v_ij . grad_i W_ij in the
     /// same neighbour loop (then leave `Continuity()` out). Default false.
     pub with_continuity: bool,
-    /// Arithmetic of the neighbour sums: `Double` (default) or `Single` (f32 records
-    /// and sums, sixteen neighbours at a time; the state and the time integration stay
-    /// in double precision). Single needs the Wendland kernel and an x86-64 processor
-    /// with AVX2 (docs/performance.md gives its accuracy cost).
-    pub precision: Precision,
 }
 
 impl Default for Params {
@@ -57,7 +52,6 @@ impl Default for Params {
             epsilon_positive: 0.01,
             exponent: 4,
             with_continuity: false,
-            precision: Precision::Double,
         }
     }
 }
@@ -88,7 +82,6 @@ pub fn register(registry: &mut StageRegistry) {
             Ok(Forces {
                 params: p,
                 dissipation: Vec::new(),
-                single: Vec::new(),
             })
         },
     );
@@ -98,8 +91,6 @@ pub struct Forces {
     params: Params,
     /// Per-particle dissipation rates, kept between steps (no per-step allocation).
     dissipation: Vec<f64>,
-    /// The packed records in single precision (`precision: Single`), kept likewise.
-    single: Vec<PackedF32>,
 }
 
 /// Work dissipated by the artificial viscosity: the forces stage stores its rate here
@@ -117,7 +108,6 @@ impl Stage for Forces {
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         require_neighbours(sim, "forces")?;
-        self.params.precision.check(sim, "forces")?;
         ensure_component::<Fluid, Acceleration>(&mut sim.world);
         if self.params.with_continuity {
             if sim.resources.contains::<ContinuityInPipeline>() {
@@ -178,32 +168,23 @@ impl Forces {
         with_kernel!(c.kernel, h, |k| {
             let prm = Pair::new(&self.params, k.w(ds), h);
             let x8 = WendlandX8::detect(c.kernel, h);
-            let single = match (x8, self.params.precision) {
-                (Some(_), Precision::Single) => {
-                    round_all(all, &mut self.single);
-                    Some(&self.single[..])
+            let pair = |i: usize| match (x8, art, with_rate) {
+                (Some(x8), true, true) => x8.sums::<true, true, true>(&prm, all, nb.of(i), i),
+                (Some(x8), true, false) => x8.sums::<true, true, false>(&prm, all, nb.of(i), i),
+                (Some(x8), false, true) => x8.sums::<true, false, true>(&prm, all, nb.of(i), i),
+                (Some(x8), false, false) => x8.sums::<true, false, false>(&prm, all, nb.of(i), i),
+                (None, true, true) => {
+                    sum_over_neighbours::<_, true, true>(&prm, &k, all, nb.of(i), i)
                 }
-                _ => None,
-            };
-            let pair = |i: usize| match (x8, single) {
-                (Some(x8), Some(single)) => {
-                    lane_sums(&x8, &prm, single, nb.of(i), i, art, with_rate)
+                (None, true, false) => {
+                    sum_over_neighbours::<_, true, false>(&prm, &k, all, nb.of(i), i)
                 }
-                (Some(x8), None) => lane_sums(&x8, &prm, all, nb.of(i), i, art, with_rate),
-                (None, _) => match (art, with_rate) {
-                    (true, true) => {
-                        sum_over_neighbours::<_, true, true>(&prm, &k, all, nb.of(i), i)
-                    }
-                    (true, false) => {
-                        sum_over_neighbours::<_, true, false>(&prm, &k, all, nb.of(i), i)
-                    }
-                    (false, true) => {
-                        sum_over_neighbours::<_, false, true>(&prm, &k, all, nb.of(i), i)
-                    }
-                    (false, false) => {
-                        sum_over_neighbours::<_, false, false>(&prm, &k, all, nb.of(i), i)
-                    }
-                },
+                (None, false, true) => {
+                    sum_over_neighbours::<_, false, true>(&prm, &k, all, nb.of(i), i)
+                }
+                (None, false, false) => {
+                    sum_over_neighbours::<_, false, false>(&prm, &k, all, nb.of(i), i)
+                }
             };
             acc.par_chunks_mut(CHUNK)
                 .zip(optional_chunks(rate_out, n))
@@ -226,25 +207,6 @@ impl Forces {
         let power = sum_fixed(dissipation.len(), |i| dissipation[i]);
         self.dissipation = dissipation;
         Ok(power)
-    }
-}
-
-/// [`WendlandX8::sums`] with the options chosen at run time.
-#[inline(always)]
-fn lane_sums<R: Dispatch>(
-    x8: &WendlandX8,
-    prm: &Pair,
-    all: &[R],
-    neighbours: &[u32],
-    i: usize,
-    art: bool,
-    with_rate: bool,
-) -> Sums {
-    match (art, with_rate) {
-        (true, true) => x8.sums::<R, true, true, true>(prm, all, neighbours, i),
-        (true, false) => x8.sums::<R, true, true, false>(prm, all, neighbours, i),
-        (false, true) => x8.sums::<R, true, false, true>(prm, all, neighbours, i),
-        (false, false) => x8.sums::<R, true, false, false>(prm, all, neighbours, i),
     }
 }
 

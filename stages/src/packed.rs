@@ -9,13 +9,11 @@
 //! state changes between stages: re-initialisation changes densities, `Eos`
 //! pressures), so the contents are never relied on across stages.
 
-use crate::pair_x8::WendlandX8;
 use glam::DVec2;
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
 use sph_core::components::{Density, Mass, Position, Pressure, Velocity};
 use sph_core::sim::{Sim, Tait};
-use sph_core::stage::{SetupError, StepError};
+use sph_core::stage::StepError;
 use sph_core::world::Particles;
 
 /// One particle as the pair loops read it.
@@ -34,59 +32,6 @@ pub struct Packed {
     pub p_rho2: f64,
     /// Sound speed c(rho) [m/s] (filled with [`Fill::Pressure`]).
     pub c: f64,
-}
-
-/// The arithmetic of a stage's neighbour sums (a stage parameter).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub enum Precision {
-    /// f64 throughout.
-    #[default]
-    Double,
-    /// f32 records and sums (the lane sums of `crate::pair_x8`); results in f64.
-    Single,
-}
-
-impl Precision {
-    /// Setup check: single precision has only the lane sums, which need the Wendland
-    /// kernel and AVX2.
-    pub fn check(self, sim: &Sim, stage: &'static str) -> Result<(), SetupError> {
-        let c = &sim.constants;
-        if self == Precision::Single && WendlandX8::detect(c.kernel, c.h).is_none() {
-            return Err(SetupError::new(
-                stage,
-                format!(
-                    "`precision: Single` needs the Wendland kernel (this scenario's is {:?}) \
-                     and an x86-64 processor with AVX2 (and SPH_NO_SIMD unset); accepted here: Double",
-                    c.kernel
-                ),
-            ));
-        }
-        Ok(())
-    }
-}
-
-/// A [`Packed`] record in single precision (x, y, vx, vy, rho, m, p/rho^2, c): half
-/// the bytes, for the single-precision pair sums (`precision: Single`).
-#[derive(Clone, Copy, Debug, Default)]
-#[repr(C, align(32))]
-pub struct PackedF32(pub [f32; 8]);
-
-impl PackedF32 {
-    /// Rounds a double-precision record.
-    #[inline]
-    pub fn round(p: &Packed) -> Self {
-        let f = [p.x.x, p.x.y, p.v.x, p.v.y, p.rho, p.m, p.p_rho2, p.c];
-        Self(f.map(|x| x as f32))
-    }
-}
-
-/// Fills `out` with `all` rounded to single precision (in parallel; `out` is kept
-/// from step to step).
-pub fn round_all(all: &[Packed], out: &mut Vec<PackedF32>) {
-    out.resize(all.len(), PackedF32::default());
-    out.par_iter_mut()
-        .zip(all.par_iter())
-        .for_each(|(o, p)| *o = PackedF32::round(p));
 }
 
 /// The shared buffer (a resource; see the module documentation).

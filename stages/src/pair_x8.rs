@@ -15,17 +15,7 @@
 //! of the last group read a padding particle of zero mass beyond the support.
 
 use crate::forces::{Pair, Sums};
-use crate::packed::{Packed, PackedF32};
-#[cfg(target_arch = "x86_64")]
-pub(crate) use x86::Dispatch;
-
-/// Off x86-64 there are no lane sums ([`Isa::detect`] finds none); the bound stays.
-#[cfg(not(target_arch = "x86_64"))]
-pub(crate) trait Dispatch: Record {}
-#[cfg(not(target_arch = "x86_64"))]
-impl Dispatch for Packed {}
-#[cfg(not(target_arch = "x86_64"))]
-impl Dispatch for PackedF32 {}
+use crate::packed::Packed;
 use glam::DVec2;
 use sph_core::kernel::KernelKind;
 use std::f64::consts::PI;
@@ -104,22 +94,27 @@ impl WendlandX8 {
         }
     }
 
-    /// The sums of particle `i` over `neighbours` (joint indices into `all`, records
-    /// in double or single precision): the momentum terms with `FORCES` (artificial
-    /// pressure with `ART`), the continuity sum with `RATE`.
+    /// The sums of particle `i` over `neighbours` (joint indices into `all`): the
+    /// momentum terms with `FORCES` (artificial pressure with `ART`), the continuity
+    /// sum with `RATE`.
     #[inline]
-    pub(crate) fn sums<R: Dispatch, const FORCES: bool, const ART: bool, const RATE: bool>(
+    pub(crate) fn sums<const FORCES: bool, const ART: bool, const RATE: bool>(
         &self,
         prm: &Pair,
-        all: &[R],
+        all: &[Packed],
         neighbours: &[u32],
         i: usize,
     ) -> Sums {
-        check(all.len(), neighbours);
+        check(all, neighbours);
         #[cfg(target_arch = "x86_64")]
         // SAFETY: the instruction set was found on this processor (`Isa::detect`), and
         // `check` holds: every index in `neighbours` is below `all.len()`.
-        return unsafe { R::sums::<FORCES, ART, RATE>(self.isa, self, prm, all, neighbours, i) };
+        unsafe {
+            match self.isa {
+                Isa::Avx512 => x86::sums_avx512::<FORCES, ART, RATE>(self, prm, all, neighbours, i),
+                Isa::Avx2 => x86::sums_avx2::<FORCES, ART, RATE>(self, prm, all, neighbours, i),
+            }
+        }
         #[cfg(not(target_arch = "x86_64"))]
         unreachable!("no instruction set is detected off x86-64")
     }
@@ -139,7 +134,7 @@ impl WendlandX8 {
             h: 0.0,
             eta2: 0.0,
         };
-        self.sums::<_, false, false, true>(&unused, all, neighbours, i)
+        self.sums::<false, false, true>(&unused, all, neighbours, i)
             .rate
     }
 
@@ -147,34 +142,18 @@ impl WendlandX8 {
     /// re-initialisation"): sum_j m_j W_ij / sum_j (m_j/rho_j) W_ij over i itself
     /// and `neighbours`.
     #[inline]
-    pub(crate) fn shepard<R: Dispatch>(&self, all: &[R], neighbours: &[u32], i: usize) -> f64 {
-        check(all.len(), neighbours);
+    pub fn shepard(&self, all: &[Packed], neighbours: &[u32], i: usize) -> f64 {
+        check(all, neighbours);
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `sums`.
-        return unsafe { R::shepard(self.isa, self, all, neighbours, i) };
+        unsafe {
+            match self.isa {
+                Isa::Avx512 => x86::shepard_avx512(self, all, neighbours, i),
+                Isa::Avx2 => x86::shepard_avx2(self, all, neighbours, i),
+            }
+        }
         #[cfg(not(target_arch = "x86_64"))]
         unreachable!("no instruction set is detected off x86-64")
-    }
-}
-
-/// A particle record the lane sums read: its fields x, y, vx, vy, rho, m, p/rho^2
-/// and c, in that order in memory.
-pub(crate) trait Record: Copy {
-    fn fields(&self) -> [f64; 8];
-}
-
-impl Record for Packed {
-    #[inline(always)]
-    fn fields(&self) -> [f64; 8] {
-        let p = self;
-        [p.x.x, p.x.y, p.v.x, p.v.y, p.rho, p.m, p.p_rho2, p.c]
-    }
-}
-
-impl Record for PackedF32 {
-    #[inline(always)]
-    fn fields(&self) -> [f64; 8] {
-        self.0.map(f64::from)
     }
 }
 
@@ -182,9 +161,9 @@ impl Record for PackedF32 {
 /// NeighbourGrid builds the lists from the same particles in the same step) every
 /// neighbour is a particle of `all`.
 #[inline(always)]
-fn check(len: usize, neighbours: &[u32]) {
-    assert!(len < (i32::MAX / 8) as usize);
-    debug_assert!(neighbours.iter().all(|&j| (j as usize) < len));
+fn check(all: &[Packed], neighbours: &[u32]) {
+    assert!(all.len() < (i32::MAX / 8) as usize);
+    debug_assert!(neighbours.iter().all(|&j| (j as usize) < all.len()));
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -192,7 +171,7 @@ pub(crate) mod x86 {
     use super::*;
     use std::arch::x86_64::*;
 
-    /// Field offsets in a record ([`Packed`] or [`PackedF32`]), in its scalars.
+    /// Field offsets in a [`Packed`] record, in f64s.
     const X: usize = 0;
     const Y: usize = 1;
     const VX: usize = 2;
@@ -202,21 +181,17 @@ pub(crate) mod x86 {
     const P_RHO2: usize = 6;
     const C: usize = 7;
     const _: () = assert!(std::mem::size_of::<Packed>() == 8 * 8);
-    const _: () = assert!(std::mem::size_of::<PackedF32>() == 8 * 4);
 
-    /// A vector of lanes (eight f64 or sixteen f32) and the operations the sums need.
-    /// Every method is `#[inline(always)]` and is only called from functions compiled
-    /// with the implementation's target features, where its intrinsics inline.
+    /// Eight f64 lanes and the operations the sums need. Every method is
+    /// `#[inline(always)]` and is only called from functions compiled with the
+    /// implementation's target features, where its intrinsics inline.
     ///
     /// # Safety
     /// Callers must run on a processor with the implementation's features.
     pub(crate) trait Lanes: Copy {
-        /// Lanes, and so neighbours per group.
-        const N: usize;
-        /// The particle records it gathers from.
-        type Record: Record;
         type Mask: Copy;
-        /// The record offsets of a group and the lanes it uses.
+        /// The lanes in use for a group of `js` (the first `js.len()` of eight), with
+        /// the record offsets of `js`.
         type Index: Copy;
         unsafe fn splat(x: f64) -> Self;
         unsafe fn add(self, b: Self) -> Self;
@@ -233,35 +208,21 @@ pub(crate) mod x86 {
         /// `yes` where `m`, else `no`.
         unsafe fn select(m: Self::Mask, yes: Self, no: Self) -> Self;
         /// # Safety
-        /// `js.len()` is 1 to `N`.
+        /// `js.len()` is 1 to 8.
         unsafe fn index(js: &[u32]) -> Self::Index;
-        /// Field `field` of the records of `index` in the buffer at `base`, `pad`
-        /// in the unused lanes.
+        /// Field `field` of the records of `index` (f64s from `base`), `pad` elsewhere.
         ///
         /// # Safety
         /// Every record of `index` lies within the buffer at `base`.
-        unsafe fn gather(
-            index: Self::Index,
-            base: *const Self::Record,
-            field: usize,
-            pad: f64,
-        ) -> Self;
-        /// The sum of the lanes, in f64, in a fixed order (a pairwise tree).
-        unsafe fn reduce(self) -> f64;
+        unsafe fn gather(index: Self::Index, base: *const f64, field: usize, pad: f64) -> Self;
+        unsafe fn to_array(self) -> [f64; 8];
     }
 
-    /// The pairwise sum a[0] + a[1], (a[0] + a[1]) + (a[2] + a[3]), ... of a
-    /// power-of-two number of values: the lanes' fixed reduction order.
+    /// The sum of the lanes in a fixed order (the same for every implementation).
     #[inline(always)]
-    fn tree<const N: usize>(mut a: [f64; N]) -> f64 {
-        let mut n = N;
-        while n > 1 {
-            for k in 0..n / 2 {
-                a[k] = a[2 * k] + a[2 * k + 1];
-            }
-            n /= 2;
-        }
-        a[0]
+    unsafe fn reduce<V: Lanes>(v: V) -> f64 {
+        let a = unsafe { v.to_array() };
+        ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]))
     }
 
     /// The element-wise arithmetic of a [`Lanes`] type, each operation by the given
@@ -275,31 +236,17 @@ pub(crate) mod x86 {
         )*};
     }
 
-    /// One 512-bit vector: eight f64 or sixteen f32.
     #[derive(Clone, Copy)]
-    pub(crate) struct Avx512<T>(T);
+    pub(crate) struct Avx512(__m512d);
 
-    /// Two 256-bit vectors: lanes 0-3 and 4-7 (f64) or 0-7 and 8-15 (f32).
-    #[derive(Clone, Copy)]
-    pub(crate) struct Avx2<T>([T; 2]);
-
-    impl<T: Copy> Avx512<T> {
+    impl Avx512 {
         #[inline(always)]
-        unsafe fn each(self, b: Self, f: impl Fn(T, T) -> T) -> Self {
+        unsafe fn each(self, b: Self, f: impl Fn(__m512d, __m512d) -> __m512d) -> Self {
             Self(f(self.0, b.0))
         }
     }
 
-    impl<T: Copy> Avx2<T> {
-        #[inline(always)]
-        unsafe fn each(self, b: Self, f: impl Fn(T, T) -> T) -> Self {
-            Self([f(self.0[0], b.0[0]), f(self.0[1], b.0[1])])
-        }
-    }
-
-    impl Lanes for Avx512<__m512d> {
-        const N: usize = 8;
-        type Record = Packed;
+    impl Lanes for Avx512 {
         type Mask = __mmask8;
         type Index = (__m256i, __mmask8);
         arithmetic!(add => _mm512_add_pd, sub => _mm512_sub_pd, mul => _mm512_mul_pd,
@@ -336,95 +283,34 @@ pub(crate) mod x86 {
             (_mm256_slli_epi32::<3>(j), lanes)
         }
         #[inline(always)]
-        unsafe fn gather(index: Self::Index, base: *const Packed, field: usize, pad: f64) -> Self {
+        unsafe fn gather(index: Self::Index, base: *const f64, field: usize, pad: f64) -> Self {
             let (offsets, lanes) = index;
-            let (src, p) = (_mm512_set1_pd(pad), base as *const f64);
-            Self(unsafe { _mm512_mask_i32gather_pd::<8>(src, lanes, offsets, p.add(field)) })
+            let src = _mm512_set1_pd(pad);
+            Self(unsafe { _mm512_mask_i32gather_pd::<8>(src, lanes, offsets, base.add(field)) })
         }
         #[inline(always)]
-        unsafe fn reduce(self) -> f64 {
+        unsafe fn to_array(self) -> [f64; 8] {
             let mut a = [0.0; 8];
             unsafe { _mm512_storeu_pd(a.as_mut_ptr(), self.0) };
-            tree(a)
+            a
         }
     }
 
-    impl Lanes for Avx512<__m512> {
-        const N: usize = 16;
-        type Record = PackedF32;
-        type Mask = __mmask16;
-        type Index = (__m512i, __mmask16);
-        arithmetic!(add => _mm512_add_ps, sub => _mm512_sub_ps, mul => _mm512_mul_ps,
-                    div => _mm512_div_ps, max => _mm512_max_ps);
+    /// Lanes 0-3 and 4-7.
+    #[derive(Clone, Copy)]
+    pub(crate) struct Avx2([__m256d; 2]);
+
+    impl Avx2 {
         #[inline(always)]
-        unsafe fn splat(x: f64) -> Self {
-            Self(_mm512_set1_ps(x as f32))
-        }
-        #[inline(always)]
-        unsafe fn sqrt(self) -> Self {
-            Self(_mm512_sqrt_ps(self.0))
-        }
-        #[inline(always)]
-        unsafe fn lt(self, b: Self) -> __mmask16 {
-            _mm512_cmp_ps_mask::<_CMP_LT_OQ>(self.0, b.0)
-        }
-        #[inline(always)]
-        unsafe fn and(a: __mmask16, b: __mmask16) -> __mmask16 {
-            a & b
-        }
-        #[inline(always)]
-        unsafe fn keep(self, m: __mmask16) -> Self {
-            Self(_mm512_maskz_mov_ps(m, self.0))
-        }
-        #[inline(always)]
-        unsafe fn select(m: __mmask16, yes: Self, no: Self) -> Self {
-            Self(_mm512_mask_blend_ps(m, no.0, yes.0))
-        }
-        #[inline(always)]
-        unsafe fn index(js: &[u32]) -> Self::Index {
-            let lanes = ((1u32 << js.len()) - 1) as u16;
-            // SAFETY: the masked load reads js[..js.len()] only.
-            let j = unsafe { _mm512_maskz_loadu_epi32(lanes, js.as_ptr() as *const i32) };
-            (_mm512_slli_epi32::<3>(j), lanes)
-        }
-        #[inline(always)]
-        unsafe fn gather(
-            index: Self::Index,
-            base: *const PackedF32,
-            field: usize,
-            pad: f64,
-        ) -> Self {
-            let (offsets, lanes) = index;
-            let (src, p) = (_mm512_set1_ps(pad as f32), base as *const f32);
-            Self(unsafe { _mm512_mask_i32gather_ps::<4>(src, lanes, offsets, p.add(field)) })
-        }
-        #[inline(always)]
-        unsafe fn reduce(self) -> f64 {
-            let mut a = [0.0f32; 16];
-            unsafe { _mm512_storeu_ps(a.as_mut_ptr(), self.0) };
-            tree(a.map(f64::from))
+        unsafe fn each(self, b: Self, f: impl Fn(__m256d, __m256d) -> __m256d) -> Self {
+            Self([f(self.0[0], b.0[0]), f(self.0[1], b.0[1])])
         }
     }
 
-    /// The lanes of a group in use, as all-ones 64-bit (`WIDE`) or 32-bit elements, and
-    /// the record offsets (8 scalars per record) of `js`, zero in the unused lanes
-    /// (which the masked gathers do not read).
-    #[inline(always)]
-    fn offsets<const N: usize>(js: &[u32]) -> ([i32; N], [i32; N]) {
-        let mut offsets = [0i32; N];
-        let mut used = [0i32; N];
-        for (l, &j) in js.iter().enumerate() {
-            offsets[l] = (j as i32) << 3;
-            used[l] = -1;
-        }
-        (offsets, used)
-    }
-
-    impl Lanes for Avx2<__m256d> {
-        const N: usize = 8;
-        type Record = Packed;
+    impl Lanes for Avx2 {
         /// All ones in the lanes that are set.
         type Mask = [__m256d; 2];
+        /// Record offsets, and the lanes in use as a mask.
         type Index = ([__m128i; 2], [__m256d; 2]);
         arithmetic!(add => _mm256_add_pd, sub => _mm256_sub_pd, mul => _mm256_mul_pd,
                     div => _mm256_div_pd, max => _mm256_max_pd);
@@ -434,7 +320,7 @@ pub(crate) mod x86 {
         }
         #[inline(always)]
         unsafe fn sqrt(self) -> Self {
-            Self(self.0.map(|x| _mm256_sqrt_pd(x)))
+            Self([_mm256_sqrt_pd(self.0[0]), _mm256_sqrt_pd(self.0[1])])
         }
         #[inline(always)]
         unsafe fn lt(self, b: Self) -> Self::Mask {
@@ -450,112 +336,57 @@ pub(crate) mod x86 {
         }
         #[inline(always)]
         unsafe fn select(m: Self::Mask, yes: Self, no: Self) -> Self {
-            Self([0, 1].map(|h| _mm256_blendv_pd(no.0[h], yes.0[h], m[h])))
+            Self([
+                _mm256_blendv_pd(no.0[0], yes.0[0], m[0]),
+                _mm256_blendv_pd(no.0[1], yes.0[1], m[1]),
+            ])
         }
         #[inline(always)]
         unsafe fn index(js: &[u32]) -> Self::Index {
-            let (offsets, used) = offsets::<8>(js);
-            // SAFETY: reads of the local arrays; each 32-bit "used" flag is widened
-            // to a 64-bit lane mask.
-            unsafe {
-                let o = offsets.as_ptr() as *const __m128i;
-                let u = used.as_ptr() as *const __m128i;
-                let wide = |k: usize| {
-                    _mm256_castsi256_pd(_mm256_cvtepi32_epi64(_mm_loadu_si128(u.add(k))))
-                };
+            // Unused lanes gather nothing (masked off); their offset 0 is never read.
+            let mut j = [0i32; 8];
+            for (o, &x) in j.iter_mut().zip(js) {
+                *o = (x as i32) << 3;
+            }
+            let used = |l: usize| if l < js.len() { -1i64 } else { 0 };
+            let lanes = |l: usize| {
+                _mm256_castsi256_pd(_mm256_set_epi64x(
+                    used(l + 3),
+                    used(l + 2),
+                    used(l + 1),
+                    used(l),
+                ))
+            };
+            // SAFETY: reads of the local array.
+            let (lo, hi) = unsafe {
                 (
-                    [_mm_loadu_si128(o), _mm_loadu_si128(o.add(1))],
-                    [wide(0), wide(1)],
+                    _mm_loadu_si128(j.as_ptr() as *const __m128i),
+                    _mm_loadu_si128(j.as_ptr().add(4) as *const __m128i),
                 )
+            };
+            ([lo, hi], [lanes(0), lanes(4)])
+        }
+        #[inline(always)]
+        unsafe fn gather(index: Self::Index, base: *const f64, field: usize, pad: f64) -> Self {
+            let (offsets, lanes) = index;
+            let src = _mm256_set1_pd(pad);
+            // SAFETY: the caller's contract; masked-off lanes are not read.
+            unsafe {
+                let p = base.add(field);
+                Self([
+                    _mm256_mask_i32gather_pd::<8>(src, p, offsets[0], lanes[0]),
+                    _mm256_mask_i32gather_pd::<8>(src, p, offsets[1], lanes[1]),
+                ])
             }
         }
         #[inline(always)]
-        unsafe fn gather(index: Self::Index, base: *const Packed, field: usize, pad: f64) -> Self {
-            let (offsets, lanes) = index;
-            let (src, p) = (_mm256_set1_pd(pad), base as *const f64);
-            // SAFETY: the caller's contract; masked-off lanes are not read.
-            Self([0, 1].map(|h| unsafe {
-                _mm256_mask_i32gather_pd::<8>(src, p.add(field), offsets[h], lanes[h])
-            }))
-        }
-        #[inline(always)]
-        unsafe fn reduce(self) -> f64 {
+        unsafe fn to_array(self) -> [f64; 8] {
             let mut a = [0.0; 8];
             unsafe {
                 _mm256_storeu_pd(a.as_mut_ptr(), self.0[0]);
                 _mm256_storeu_pd(a.as_mut_ptr().add(4), self.0[1]);
             }
-            tree(a)
-        }
-    }
-
-    impl Lanes for Avx2<__m256> {
-        const N: usize = 16;
-        type Record = PackedF32;
-        type Mask = [__m256; 2];
-        type Index = ([__m256i; 2], [__m256; 2]);
-        arithmetic!(add => _mm256_add_ps, sub => _mm256_sub_ps, mul => _mm256_mul_ps,
-                    div => _mm256_div_ps, max => _mm256_max_ps);
-        #[inline(always)]
-        unsafe fn splat(x: f64) -> Self {
-            Self([_mm256_set1_ps(x as f32); 2])
-        }
-        #[inline(always)]
-        unsafe fn sqrt(self) -> Self {
-            Self(self.0.map(|x| _mm256_sqrt_ps(x)))
-        }
-        #[inline(always)]
-        unsafe fn lt(self, b: Self) -> Self::Mask {
-            unsafe { self.each(b, |x, y| _mm256_cmp_ps::<_CMP_LT_OQ>(x, y)) }.0
-        }
-        #[inline(always)]
-        unsafe fn and(a: Self::Mask, b: Self::Mask) -> Self::Mask {
-            unsafe { Self(a).each(Self(b), |x, y| _mm256_and_ps(x, y)) }.0
-        }
-        #[inline(always)]
-        unsafe fn keep(self, m: Self::Mask) -> Self {
-            unsafe { Self(m).each(self, |m, x| _mm256_and_ps(m, x)) }
-        }
-        #[inline(always)]
-        unsafe fn select(m: Self::Mask, yes: Self, no: Self) -> Self {
-            Self([0, 1].map(|h| _mm256_blendv_ps(no.0[h], yes.0[h], m[h])))
-        }
-        #[inline(always)]
-        unsafe fn index(js: &[u32]) -> Self::Index {
-            let (offsets, used) = offsets::<16>(js);
-            // SAFETY: reads of the local arrays.
-            unsafe {
-                let o = offsets.as_ptr() as *const __m256i;
-                let u = used.as_ptr() as *const __m256i;
-                let mask = |k: usize| _mm256_castsi256_ps(_mm256_loadu_si256(u.add(k)));
-                (
-                    [_mm256_loadu_si256(o), _mm256_loadu_si256(o.add(1))],
-                    [mask(0), mask(1)],
-                )
-            }
-        }
-        #[inline(always)]
-        unsafe fn gather(
-            index: Self::Index,
-            base: *const PackedF32,
-            field: usize,
-            pad: f64,
-        ) -> Self {
-            let (offsets, lanes) = index;
-            let (src, p) = (_mm256_set1_ps(pad as f32), base as *const f32);
-            // SAFETY: the caller's contract; masked-off lanes are not read.
-            Self([0, 1].map(|h| unsafe {
-                _mm256_mask_i32gather_ps::<4>(src, p.add(field), offsets[h], lanes[h])
-            }))
-        }
-        #[inline(always)]
-        unsafe fn reduce(self) -> f64 {
-            let mut a = [0.0f32; 16];
-            unsafe {
-                _mm256_storeu_ps(a.as_mut_ptr(), self.0[0]);
-                _mm256_storeu_ps(a.as_mut_ptr().add(8), self.0[1]);
-            }
-            tree(a.map(f64::from))
+            a
         }
     }
 
@@ -606,7 +437,7 @@ pub(crate) mod x86 {
     /// needs, and the gather of any other field.
     struct Group<V: Lanes> {
         index: V::Index,
-        base: *const V::Record,
+        base: *const f64,
         /// The padding record (zero mass, beyond the support, at rest relative to i)
         /// read by the unused lanes.
         pad: [f64; 8],
@@ -635,20 +466,25 @@ pub(crate) mod x86 {
     #[inline(always)]
     unsafe fn for_each_group<V: Lanes>(
         k: &WendlandX8,
-        all: &[V::Record],
+        all: &[Packed],
         neighbours: &[u32],
         i: usize,
         mut f: impl FnMut(&Group<V>),
     ) {
-        let me = all[i].fields();
-        let mut pad = me;
-        pad[X] += 4.0 * k.support;
-        (pad[M], pad[P_RHO2], pad[C]) = (0.0, 0.0, 0.0);
-        let base = all.as_ptr();
+        let me = all[i];
+        let p = Packed {
+            x: me.x + DVec2::new(4.0 * k.support, 0.0),
+            m: 0.0,
+            p_rho2: 0.0,
+            c: 0.0,
+            ..me
+        };
+        let pad = [p.x.x, p.x.y, p.v.x, p.v.y, p.rho, p.m, p.p_rho2, p.c];
+        let base = all.as_ptr() as *const f64;
         unsafe {
             let s = V::splat;
-            let (xi, yi) = (s(me[X]), s(me[Y]));
-            for js in neighbours.chunks(V::N) {
+            let (xi, yi) = (s(me.x.x), s(me.x.y));
+            for js in neighbours.chunks(8) {
                 let index = V::index(js);
                 let (xj, yj) = (
                     V::gather(index, base, X, pad[X]),
@@ -679,11 +515,11 @@ pub(crate) mod x86 {
     #[inline(always)]
     unsafe fn shepard<V: Lanes>(
         k: &WendlandX8,
-        all: &[V::Record],
+        all: &[Packed],
         neighbours: &[u32],
         i: usize,
     ) -> f64 {
-        let me = all[i].fields();
+        let me = all[i];
         unsafe {
             let (mut num, mut den) = (V::splat(0.0), V::splat(0.0));
             for_each_group::<V>(k, all, neighbours, i, |g| {
@@ -694,8 +530,8 @@ pub(crate) mod x86 {
             });
             // i itself: W(0) = norm.
             let w0 = k.norm;
-            let num = me[M] * w0 + num.reduce();
-            let den = me[M] / me[RHO] * w0 + den.reduce();
+            let num = me.m * w0 + reduce(num);
+            let den = me.m / me.rho * w0 + reduce(den);
             num / den
         }
     }
@@ -708,15 +544,15 @@ pub(crate) mod x86 {
     unsafe fn sums<V: Lanes, const FORCES: bool, const ART: bool, const RATE: bool>(
         k: &WendlandX8,
         prm: &Pair,
-        all: &[V::Record],
+        all: &[Packed],
         neighbours: &[u32],
         i: usize,
     ) -> Sums {
-        let me = all[i].fields();
+        let me = all[i];
         unsafe {
             let s = V::splat;
-            let (vxi, vyi) = (s(me[VX]), s(me[VY]));
-            let (rhoi, pi_r2, ci) = (s(me[RHO]), s(me[P_RHO2]), s(me[C]));
+            let (vxi, vyi) = (s(me.v.x), s(me.v.y));
+            let (rhoi, pi_r2, ci) = (s(me.rho), s(me.p_rho2), s(me.c));
             let zero = s(0.0);
             let (mut ax, mut ay, mut power, mut rate) = (zero, zero, zero, zero);
             for_each_group::<V>(k, all, neighbours, i, |grp| {
@@ -769,24 +605,23 @@ pub(crate) mod x86 {
                 power = power.add(mj.mul(visc).mul(vij_grad));
             });
             Sums {
-                acc: DVec2::new(ax.reduce(), ay.reduce()),
-                visc_power: power.reduce(),
-                rate: rate.reduce(),
+                acc: DVec2::new(reduce(ax), reduce(ay)),
+                visc_power: reduce(power),
+                rate: reduce(rate),
             }
         }
     }
 
-    /// The entry points, one per instruction set and precision, each compiled with
-    /// its features, reached through [`Dispatch`] on the record type.
+    /// The entry points, one per instruction set, each compiled with its features.
     macro_rules! compiled_for {
         ($features:literal, $lanes:ty, $sums:ident, $shepard:ident) => {
             /// # Safety
             /// The processor has the features; every neighbour index is below `all.len()`.
             #[target_feature(enable = $features)]
-            unsafe fn $sums<const FORCES: bool, const ART: bool, const RATE: bool>(
+            pub(super) unsafe fn $sums<const FORCES: bool, const ART: bool, const RATE: bool>(
                 k: &WendlandX8,
                 prm: &Pair,
-                all: &[<$lanes as Lanes>::Record],
+                all: &[Packed],
                 neighbours: &[u32],
                 i: usize,
             ) -> Sums {
@@ -796,9 +631,9 @@ pub(crate) mod x86 {
             /// # Safety
             /// As for the sums.
             #[target_feature(enable = $features)]
-            unsafe fn $shepard(
+            pub(super) unsafe fn $shepard(
                 k: &WendlandX8,
-                all: &[<$lanes as Lanes>::Record],
+                all: &[Packed],
                 neighbours: &[u32],
                 i: usize,
             ) -> f64 {
@@ -806,91 +641,8 @@ pub(crate) mod x86 {
             }
         };
     }
-    compiled_for!(
-        "avx512f,avx512vl",
-        Avx512<__m512d>,
-        sums_avx512,
-        shepard_avx512
-    );
-    compiled_for!("avx2", Avx2<__m256d>, sums_avx2, shepard_avx2);
-    compiled_for!(
-        "avx512f,avx512vl",
-        Avx512<__m512>,
-        sums_avx512_f32,
-        shepard_avx512_f32
-    );
-    compiled_for!("avx2", Avx2<__m256>, sums_avx2_f32, shepard_avx2_f32);
-
-    /// The entry points for a record type (so its precision).
-    pub(crate) trait Dispatch: Record {
-        /// # Safety
-        /// `isa` is on this processor; every neighbour index is below `all.len()`.
-        unsafe fn sums<const FORCES: bool, const ART: bool, const RATE: bool>(
-            isa: Isa,
-            k: &WendlandX8,
-            prm: &Pair,
-            all: &[Self],
-            neighbours: &[u32],
-            i: usize,
-        ) -> Sums;
-        /// # Safety
-        /// As for `sums`.
-        unsafe fn shepard(
-            isa: Isa,
-            k: &WendlandX8,
-            all: &[Self],
-            neighbours: &[u32],
-            i: usize,
-        ) -> f64;
-    }
-
-    macro_rules! dispatch {
-        ($record:ty, $sums512:ident, $sums2:ident, $shepard512:ident, $shepard2:ident) => {
-            impl Dispatch for $record {
-                unsafe fn sums<const FORCES: bool, const ART: bool, const RATE: bool>(
-                    isa: Isa,
-                    k: &WendlandX8,
-                    prm: &Pair,
-                    all: &[Self],
-                    neighbours: &[u32],
-                    i: usize,
-                ) -> Sums {
-                    // SAFETY: the caller's contract.
-                    unsafe {
-                        match isa {
-                            Isa::Avx512 => {
-                                $sums512::<FORCES, ART, RATE>(k, prm, all, neighbours, i)
-                            }
-                            Isa::Avx2 => $sums2::<FORCES, ART, RATE>(k, prm, all, neighbours, i),
-                        }
-                    }
-                }
-                unsafe fn shepard(
-                    isa: Isa,
-                    k: &WendlandX8,
-                    all: &[Self],
-                    neighbours: &[u32],
-                    i: usize,
-                ) -> f64 {
-                    // SAFETY: the caller's contract.
-                    unsafe {
-                        match isa {
-                            Isa::Avx512 => $shepard512(k, all, neighbours, i),
-                            Isa::Avx2 => $shepard2(k, all, neighbours, i),
-                        }
-                    }
-                }
-            }
-        };
-    }
-    dispatch!(Packed, sums_avx512, sums_avx2, shepard_avx512, shepard_avx2);
-    dispatch!(
-        PackedF32,
-        sums_avx512_f32,
-        sums_avx2_f32,
-        shepard_avx512_f32,
-        shepard_avx2_f32
-    );
+    compiled_for!("avx512f,avx512vl", Avx512, sums_avx512, shepard_avx512);
+    compiled_for!("avx2", Avx2, sums_avx2, shepard_avx2);
 }
 
 #[cfg(test)]
@@ -970,7 +722,7 @@ mod tests {
                 .iter()
                 .map(|&isa| {
                     let x8 = WendlandX8::with_isa(isa, h);
-                    let a = x8.sums::<_, true, true, true>(&prm, &all, &near, i);
+                    let a = x8.sums::<true, true, true>(&prm, &all, &near, i);
                     let shepard = x8.shepard(&all, &near, i);
                     [a.acc.x, a.acc.y, a.rate, a.visc_power, shepard]
                         .map(f64::to_bits)
@@ -999,7 +751,7 @@ mod tests {
                 ..Params::default()
             };
             let prm = Pair::new(&params, k.w(0.01), h);
-            let a = x8.sums::<_, true, true, true>(&prm, &all, &near, i);
+            let a = x8.sums::<true, true, true>(&prm, &all, &near, i);
             let b = sum_over_neighbours::<_, true, true>(&prm, &k, &all, &near, i);
             let scale = b.acc.length().max(1.0);
             assert!(
@@ -1030,7 +782,7 @@ mod tests {
             // Fewer than eight neighbours: the padding lanes add nothing.
             let few = &near[..5];
             let (a, b) = (
-                x8.sums::<_, true, true, true>(&prm, &all, few, i),
+                x8.sums::<true, true, true>(&prm, &all, few, i),
                 sum_over_neighbours::<_, true, true>(&prm, &k, &all, few, i),
             );
             assert!(close(a.acc.x, b.acc.x, scale) && close(a.rate, b.rate, b.rate.abs().max(1.0)));

@@ -10,7 +10,7 @@ use crate::ghost_walls::refresh_ghost_density;
 use crate::integrate::HalfDensity;
 use crate::mls::MlsSums;
 use crate::neighbour_grid::Neighbours;
-use crate::packed::{round_all, with_packed, Fill, Packed, PackedF32, Precision};
+use crate::packed::{with_packed, Fill, Packed};
 use crate::pair_x8::WendlandX8;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -37,9 +37,6 @@ pub enum Filter {
 pub struct Params {
     /// Default Shepard (the paper's filter).
     pub filter: Filter,
-    /// Arithmetic of the Shepard sums: `Double` (default) or `Single` (as for
-    /// `Forces(precision)`; the MLS filter is always double).
-    pub precision: Precision,
 }
 
 pub fn register(registry: &mut StageRegistry) {
@@ -49,9 +46,7 @@ pub fn register(registry: &mut StageRegistry) {
         |p: Params| {
             Ok(Reinitialise {
                 filter: p.filter,
-                precision: p.precision,
                 filtered: Vec::new(),
-                single: Vec::new(),
             })
         },
     );
@@ -59,10 +54,7 @@ pub fn register(registry: &mut StageRegistry) {
 
 pub struct Reinitialise {
     filter: Filter,
-    precision: Precision,
     filtered: Vec<f64>,
-    /// The packed records in single precision (`precision: Single`).
-    single: Vec<PackedF32>,
 }
 
 impl Stage for Reinitialise {
@@ -71,13 +63,12 @@ impl Stage for Reinitialise {
     }
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
-        require_neighbours(sim, "reinitialise")?;
-        self.precision.check(sim, "reinitialise")
+        require_neighbours(sim, "reinitialise")
     }
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
-        let (filtered, single) = (&mut self.filtered, &mut self.single);
-        let (filter, precision) = (self.filter, self.precision);
+        let filtered = &mut self.filtered;
+        let filter = self.filter;
         let done = with_packed(sim, Fill::Basic, |sim, _, all| {
             let Some(nb) = sim.resources.get::<Neighbours>() else {
                 return Ok(false);
@@ -85,13 +76,6 @@ impl Stage for Reinitialise {
             let c = &sim.constants;
             filtered.resize(nb.n_fluid, 0.0);
             let x8 = WendlandX8::detect(c.kernel, c.h);
-            let single = match (x8, precision) {
-                (Some(_), Precision::Single) => {
-                    round_all(all, single);
-                    Some(&single[..])
-                }
-                _ => None,
-            };
             with_kernel!(c.kernel, c.h, |k| {
                 let w0 = k.w(0.0);
                 filtered.par_iter_mut().enumerate().for_each(|(i, out)| {
@@ -112,10 +96,9 @@ impl Stage for Reinitialise {
                         *out = sums.mls();
                         return;
                     }
-                    match (x8, single) {
-                        (Some(x8), Some(single)) => return *out = x8.shepard(single, nb.of(i), i),
-                        (Some(x8), None) => return *out = x8.shepard(all, nb.of(i), i),
-                        (None, _) => {}
+                    if let Some(x8) = x8 {
+                        *out = x8.shepard(all, nb.of(i), i);
+                        return;
                     }
                     let (mut num, mut den) = (mi * w0, mi / rhoi * w0);
                     for &j in nb.of(i) {
