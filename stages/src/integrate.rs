@@ -42,6 +42,17 @@ pub struct Params {
     /// and continuity would keep rarefying it as it leaves the wall it crossed (the
     /// sloshing runs' roof spray). Default false.
     pub restore_density_on_reflection: bool,
+    /// Least density, as a fraction f of rho_0: after every step a fluid particle's
+    /// density (and its half-step density) below f rho_0 is raised to f rho_0, and the
+    /// particle-steps so raised are counted in the `density_floored` diagnostic. Meant
+    /// with `Eos(min_pressure: 0)` and f < 1: every density below rho_0 then has zero
+    /// pressure, so the floor changes no pressure, only the volume m/rho a thinned
+    /// particle brings to the Shepard sums and the mean density of the viscosity. It
+    /// stops spray from thinning without bound (the continuity equation rarefies a
+    /// particle its neighbours move away from, and nothing pushes back on a pressureless
+    /// particle); the density guard still catches a compression beyond
+    /// rho_0 (1 + `density_limit`). Not in physics.md. Default None: no floor.
+    pub density_floor: Option<f64>,
 }
 
 impl Default for Params {
@@ -53,6 +64,7 @@ impl Default for Params {
             density_limit: 0.5,
             reflect_at_walls: true,
             restore_density_on_reflection: false,
+            density_floor: None,
         }
     }
 }
@@ -85,6 +97,14 @@ pub fn register(registry: &mut StageRegistry) {
                     "field `density_limit` = {} is out of range; accepted: a number > 0",
                     p.density_limit
                 ));
+            }
+            if let Some(f) = p.density_floor {
+                if !(f > 0.0 && f <= 1.0) {
+                    return Err(format!(
+                        "field `density_floor` = {f} is out of range; accepted: a fraction of \
+                         rho_0 with 0 < f <= 1 (below 1 with Eos(min_pressure: 0), e.g. 0.9)"
+                    ));
+                }
             }
             Ok(Integrate {
                 params: p,
@@ -224,9 +244,11 @@ impl Stage for Integrate {
         let (lo, hi) = c.domain;
         let (rho0, limit) = (c.eos.rho0, self.params.density_limit);
         let reach = c.support();
+        let least = self.params.density_floor.map(|f| f * rho0);
         // One pass: kick, drift, reflect at the walls (at their end-of-step place),
-        // then check; it returns the reflections and the lowest offending index.
-        let (reflected, bad) = (
+        // raise densities to the floor, then check; it returns the reflections, the
+        // floored particles and the lowest offending index.
+        let (reflected, floored, bad) = (
             &mut x[..],
             &mut v[..],
             &mut rho[..],
@@ -249,6 +271,7 @@ impl Stage for Integrate {
                 v.0 = vh.0 + 0.5 * dt * a.0;
                 rho.0 = rh.0 + 0.5 * dt * r.0;
                 let hit = reflect && self.reflect(floor, reach, x, v, vh, rho, rh);
+                let raised = least.is_some_and(|least| raise_to_floor(least, rho, rh));
                 let p = x.0;
                 let ok = p.is_finite()
                     && rho.0.is_finite()
@@ -256,16 +279,21 @@ impl Stage for Integrate {
                     && p.cmple(hi).all()
                     && (rho.0 / rho0 - 1.0).abs() <= limit
                     && self.walls.crossed(p, reach).is_none();
-                (hit as usize, (!ok).then_some(i))
+                (hit as usize, raised as usize, (!ok).then_some(i))
             })
             .reduce(
-                || (0, None),
-                |(h1, b1), (h2, b2)| (h1 + h2, b1.into_iter().chain(b2).min()),
+                || (0, 0, None),
+                |(h1, f1, b1), (h2, f2, b2)| (h1 + h2, f1 + f2, b1.into_iter().chain(b2).min()),
             );
         if reflected > 0 {
             *sim.diagnostics
                 .entry("wall_reflections".into())
                 .or_insert(0.0) += reflected as f64;
+        }
+        if floored > 0 {
+            *sim.diagnostics
+                .entry("density_floored".into())
+                .or_insert(0.0) += floored as f64;
         }
         match bad {
             Some(i) => Err(self.diagnose(sim, i, x[i].0, rho[i].0)),
@@ -374,6 +402,21 @@ impl Integrate {
         }
         hit
     }
+}
+
+/// Raises a density (and the half-step density) below `least` to it; returns whether
+/// it did. A non-finite density is left as it is, for the check to report.
+#[inline]
+fn raise_to_floor(least: f64, rho: &mut Density, rh: &mut HalfDensity) -> bool {
+    let below = |r: f64| r > f64::NEG_INFINITY && r < least;
+    let low = below(rho.0) || below(rh.0);
+    if below(rho.0) {
+        rho.0 = least;
+    }
+    if below(rh.0) {
+        rh.0 = least;
+    }
+    low
 }
 
 fn unstable(what: &str, i: usize, x: DVec2) -> StepError {
