@@ -47,6 +47,9 @@ impl Stage for Continuity {
             let mut rate = particles.fluid_mut::<DensityRate>()?;
             let c = &sim.constants;
             let x8 = WendlandX8::detect(c.kernel, c.h);
+            if x8.is_some() {
+                nb.check_covers(all.len())?;
+            }
             with_kernel!(c.kernel, c.h, |k| {
                 rate.par_iter_mut().enumerate().for_each(|(i, out)| {
                     if let Some(x8) = x8 {

@@ -165,9 +165,13 @@ impl Forces {
         // Per-particle outputs as optional slices, so one parallel loop serves every
         // combination; the pair sum itself is monomorphised on the options.
         let rate_out: &mut [DensityRate] = rate.as_deref_mut().unwrap_or(&mut []);
+        let x8 = WendlandX8::detect(c.kernel, h);
+        if x8.is_some() {
+            nb.check_covers(all.len())?;
+        }
         with_kernel!(c.kernel, h, |k| {
             let prm = Pair::new(&self.params, k.w(ds), h);
-            let x8 = WendlandX8::detect(c.kernel, h);
+
             let pair = |i: usize| match (x8, art, with_rate) {
                 (Some(x8), true, true) => x8.sums::<true, true, true>(&prm, all, nb.of(i), i),
                 (Some(x8), true, false) => x8.sums::<true, true, false>(&prm, all, nb.of(i), i),

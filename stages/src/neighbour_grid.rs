@@ -214,6 +214,21 @@ impl Neighbours {
         &b.list[b.offsets[k] as usize..b.offsets[k + 1] as usize]
     }
 
+    /// Checks that a buffer of `len` particles (joint numbering) holds every index in
+    /// the lists, which are below `n_fluid + n_ghost`: the SIMD pair sums gather
+    /// without bounds checks (`crate::pair_x8`).
+    pub fn check_covers(&self, len: usize) -> Result<(), StepError> {
+        if self.n_fluid + self.n_ghost <= len {
+            Ok(())
+        } else {
+            Err(StepError::Internal(format!(
+                "the neighbour lists index {} particles but the particle buffer holds {len}: \
+                 a stage between NeighbourGrid and the pair sums changed the particle count",
+                self.n_fluid + self.n_ghost
+            )))
+        }
+    }
+
     /// Total number of neighbour pairs (i, j) in the lists: the interactions one
     /// pass over all neighbours evaluates.
     pub fn interactions(&self) -> usize {

@@ -108,7 +108,8 @@ impl WendlandX8 {
         check(all, neighbours);
         #[cfg(target_arch = "x86_64")]
         // SAFETY: the instruction set was found on this processor (`Isa::detect`), and
-        // `check` holds: every index in `neighbours` is below `all.len()`.
+        // every index in `neighbours` is below `all.len()` (the callers check
+        // `Neighbours::check_covers` each step; `check` re-checks in debug builds).
         unsafe {
             match self.isa {
                 Isa::Avx512 => x86::sums_avx512::<FORCES, ART, RATE>(self, prm, all, neighbours, i),
@@ -157,9 +158,9 @@ impl WendlandX8 {
     }
 }
 
-/// What the gathers rely on: record offsets fit an i32, and (checked in debug builds;
-/// NeighbourGrid builds the lists from the same particles in the same step) every
-/// neighbour is a particle of `all`.
+/// What the gathers rely on: record offsets fit an i32, and every neighbour is a
+/// particle of `all` (the callers check `Neighbours::check_covers` once per step; per
+/// neighbour only in debug builds).
 #[inline(always)]
 fn check(all: &[Packed], neighbours: &[u32]) {
     assert!(all.len() < (i32::MAX / 8) as usize);

@@ -76,6 +76,9 @@ impl Stage for Reinitialise {
             let c = &sim.constants;
             filtered.resize(nb.n_fluid, 0.0);
             let x8 = WendlandX8::detect(c.kernel, c.h);
+            if x8.is_some() {
+                nb.check_covers(all.len())?;
+            }
             with_kernel!(c.kernel, c.h, |k| {
                 let w0 = k.w(0.0);
                 filtered.par_iter_mut().enumerate().for_each(|(i, out)| {
