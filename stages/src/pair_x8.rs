@@ -17,8 +17,7 @@
 use crate::forces::{Pair, Sums};
 use crate::packed::Packed;
 use glam::DVec2;
-use sph_core::kernel::KernelKind;
-use std::f64::consts::PI;
+use sph_core::kernel::{Kernel, KernelKind, Wendland};
 
 /// The instruction set of the eight-lane sums.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -33,6 +32,12 @@ impl Isa {
     /// The widest the processor supports; None without AVX2 or with `SPH_NO_SIMD` set.
     /// `SPH_SIMD=avx2` keeps to AVX2 on an AVX-512 processor (to measure that path).
     pub fn detect() -> Option<Self> {
+        static ISA: std::sync::OnceLock<Option<Isa>> = std::sync::OnceLock::new();
+        *ISA.get_or_init(Self::probe)
+    }
+
+    /// [`Isa::detect`]'s answer, worked out once per process.
+    fn probe() -> Option<Self> {
         #[cfg(target_arch = "x86_64")]
         if crate::scan::simd_allowed() {
             use std::arch::is_x86_feature_detected as has;
@@ -57,8 +62,8 @@ impl Isa {
     }
 }
 
-/// The Wendland C2 kernel's constants, as `sph_core::kernel::Wendland` computes them,
-/// and the instruction set to sum with.
+/// The Wendland C2 kernel's constants, taken from `sph_core::kernel::Wendland`, and
+/// the instruction set to sum with.
 #[derive(Clone, Copy, Debug)]
 pub struct WendlandX8 {
     isa: Isa,
@@ -84,13 +89,15 @@ impl WendlandX8 {
     /// The sums with a given instruction set, which the processor must have (see
     /// [`Isa::available`]).
     pub fn with_isa(isa: Isa, h: f64) -> Self {
-        let (inv_h, norm) = (1.0 / h, 7.0 / (4.0 * PI) / (h * h));
+        let k = Wendland::new(h);
+        let (inv_h, norm) = (k.inv_h(), k.norm());
         Self {
             isa,
             inv_h,
             norm,
+            // As Wendland::grad_factor forms it.
             grad_norm: norm * inv_h * inv_h,
-            support: 2.0 * h,
+            support: k.support(),
         }
     }
 
@@ -656,13 +663,7 @@ mod tests {
     /// velocities, densities and pressures of either sign, and the neighbour list of
     /// particle `i` within the support.
     fn cloud(seed: u64) -> (Vec<Packed>, Vec<u32>, usize, f64) {
-        let mut s = seed;
-        let mut next = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = crate::scan::test_numbers(seed);
         let (ds, h) = (0.01, 0.013);
         let mut all = Vec::new();
         for a in 0..9 {

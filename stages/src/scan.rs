@@ -25,6 +25,12 @@ pub enum Scan {
 impl Scan {
     /// The fastest scan the processor supports.
     pub fn detect() -> Self {
+        static SCAN: std::sync::OnceLock<Scan> = std::sync::OnceLock::new();
+        *SCAN.get_or_init(Self::probe)
+    }
+
+    /// [`Scan::detect`]'s answer, worked out once per process.
+    fn probe() -> Self {
         #[cfg(target_arch = "x86_64")]
         if simd_allowed()
             && std::arch::is_x86_feature_detected!("avx512f")
@@ -68,6 +74,18 @@ impl Scan {
 /// agree bit for bit across processors (docs/performance.md).
 pub fn simd_allowed() -> bool {
     std::env::var_os("SPH_NO_SIMD").is_none()
+}
+
+/// A reproducible stream of numbers in [0, 1) for the unit tests (a 64-bit linear
+/// congruential generator).
+#[cfg(test)]
+pub(crate) fn test_numbers(mut seed: u64) -> impl FnMut() -> f64 {
+    move || {
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    }
 }
 
 /// The candidates of one row of cells: their x, y and joint indices.
@@ -220,13 +238,7 @@ mod tests {
     /// candidates exactly on the support, the particle itself and short tails.
     #[test]
     fn every_scan_keeps_the_same_candidates() {
-        let mut seed = 12345u64;
-        let mut next = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = test_numbers(12345);
         let r2max = 1.0;
         for n in 0..40 {
             let mut xs: Vec<f64> = (0..n).map(|_| 2.0 * next() - 1.0).collect();

@@ -80,6 +80,14 @@ macro_rules! kernel_type {
                     support: $support * h,
                 }
             }
+            /// 1 / h.
+            pub fn inv_h(&self) -> f64 {
+                self.inv_h
+            }
+            /// The normalisation divided by h^2 (W = norm w(q)).
+            pub fn norm(&self) -> f64 {
+                self.norm
+            }
         }
         impl Kernel for $name {
             #[inline(always)]
