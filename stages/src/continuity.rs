@@ -34,7 +34,7 @@ impl Stage for Continuity {
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         require_neighbours(sim, "continuity")?;
-        ensure_component::<Fluid, DensityRate>(&mut sim.world);
+        ensure_component::<Fluid, DensityRate>(sim);
         sim.resources.insert(ContinuityInPipeline);
         Ok(())
     }

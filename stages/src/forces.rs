@@ -19,7 +19,7 @@ use sph_core::components::{Acceleration, DensityRate, Fluid};
 use sph_core::kernel::Kernel;
 use sph_core::sim::{whole_pow, Sim};
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::world::{ensure_component, sum_fixed, Particles};
+use sph_core::world::{ensure_component, Particles};
 use sph_core::{with_kernel, StageRegistry};
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -89,7 +89,9 @@ pub fn register(registry: &mut StageRegistry) {
 
 pub struct Forces {
     params: Params,
-    /// Per-particle dissipation rates, kept between steps (no per-step allocation).
+    /// Dissipation rate of each `CHUNK` of particles (summed in particle order), kept
+    /// between steps; the total adds them in chunk order, so it is the same for any
+    /// thread count.
     dissipation: Vec<f64>,
 }
 
@@ -108,7 +110,7 @@ impl Stage for Forces {
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         require_neighbours(sim, "forces")?;
-        ensure_component::<Fluid, Acceleration>(&mut sim.world);
+        ensure_component::<Fluid, Acceleration>(sim);
         if self.params.with_continuity {
             if sim.resources.contains::<ContinuityInPipeline>() {
                 return Err(SetupError::new(
@@ -117,7 +119,7 @@ impl Stage for Forces {
                      density rate; remove one of them",
                 ));
             }
-            ensure_component::<Fluid, DensityRate>(&mut sim.world);
+            ensure_component::<Fluid, DensityRate>(sim);
         }
         Ok(())
     }
@@ -160,7 +162,8 @@ impl Forces {
         };
         let n = acc.len();
         let mut dissipation = std::mem::take(&mut self.dissipation);
-        dissipation.resize(if want_power { n } else { 0 }, 0.0);
+        let chunks = n.div_ceil(CHUNK);
+        dissipation.resize(if want_power { chunks } else { 0 }, 0.0);
         let (art, with_rate) = (self.params.artificial_pressure, rate.is_some());
         // Per-particle outputs as optional slices, so one parallel loop serves every
         // combination; the pair sum itself is monomorphised on the options.
@@ -192,9 +195,10 @@ impl Forces {
             };
             acc.par_chunks_mut(CHUNK)
                 .zip(optional_chunks(rate_out, n))
-                .zip(optional_chunks(&mut dissipation[..], n))
+                .zip(optional_outputs(&mut dissipation[..], chunks, 1))
                 .enumerate()
-                .for_each(|(c, ((acc, mut rate), mut diss))| {
+                .for_each(|(c, ((acc, mut rate), diss))| {
+                    let mut power = 0.0;
                     for (k, a) in acc.iter_mut().enumerate() {
                         let i = c * CHUNK + k;
                         let s = pair(i);
@@ -202,13 +206,14 @@ impl Forces {
                         if let Some(r) = rate.as_deref_mut() {
                             r[k].0 = s.rate;
                         }
-                        if let Some(d) = diss.as_deref_mut() {
-                            d[k] = 0.5 * all[i].m * s.visc_power;
-                        }
+                        power += 0.5 * all[i].m * s.visc_power;
+                    }
+                    if let Some(d) = diss {
+                        d[0] = power;
                     }
                 });
         });
-        let power = sum_fixed(dissipation.len(), |i| dissipation[i]);
+        let power = dissipation.iter().sum();
         self.dissipation = dissipation;
         Ok(power)
     }
@@ -223,11 +228,21 @@ fn optional_chunks<T: Send>(
     out: &mut [T],
     n: usize,
 ) -> impl IndexedParallelIterator<Item = Option<&mut [T]>> {
+    optional_outputs(out, n.div_ceil(CHUNK), CHUNK)
+}
+
+/// `count` pieces of `per` elements of an optional output: the slice's own pieces if
+/// it holds them all, else as many `None`s (the output is not wanted).
+fn optional_outputs<T: Send>(
+    out: &mut [T],
+    count: usize,
+    per: usize,
+) -> impl IndexedParallelIterator<Item = Option<&mut [T]>> {
     use rayon::iter::Either;
-    if out.len() == n {
-        Either::Left(out.par_chunks_mut(CHUNK).map(Some))
+    if out.len().div_ceil(per) == count && !out.is_empty() {
+        Either::Left(out.par_chunks_mut(per).map(Some))
     } else {
-        Either::Right((0..n.div_ceil(CHUNK)).into_par_iter().map(|_| None))
+        Either::Right((0..count).into_par_iter().map(|_| None))
     }
 }
 

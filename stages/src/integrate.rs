@@ -142,8 +142,8 @@ impl Stage for Integrate {
     }
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
-        ensure_component::<Fluid, HalfVelocity>(&mut sim.world);
-        ensure_component::<Fluid, HalfDensity>(&mut sim.world);
+        ensure_component::<Fluid, HalfVelocity>(sim);
+        ensure_component::<Fluid, HalfDensity>(sim);
         self.walls = WallSet::from_world(&sim.world);
         Ok(())
     }

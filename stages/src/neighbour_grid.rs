@@ -8,7 +8,7 @@
 //! step.
 
 use crate::scan::Scan;
-use crate::sort_particles::{counting_sort, sort_by_cell, SortScratch};
+use crate::sort_particles::{counting_sort, sort_by_cell, SortBuffers};
 use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -16,7 +16,7 @@ use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::{Fluid, Ghost, NeighbourCount, Position};
 use sph_core::sim::Sim;
 use sph_core::stage::{Stage, StepError};
-use sph_core::world::{archetype, column, column_mut, ensure_component, Joined};
+use sph_core::world::{archetype, column, column_mut, ensure_component, ColumnKinds, Joined};
 use sph_core::StageRegistry;
 
 /// Fluid particles per parallel block when building the lists (a power of two, so
@@ -55,7 +55,6 @@ pub fn register(registry: &mut StageRegistry) {
                 count: p.count,
                 sort_every: p.sort_every,
                 calls: 0,
-                sort: SortScratch::default(),
             })
         },
     );
@@ -65,7 +64,6 @@ pub struct NeighbourGrid {
     count: bool,
     sort_every: u32,
     calls: u64,
-    sort: SortScratch,
 }
 
 /// Cells per kernel support. With 2 (cells of half the support searched 5 x 5, an
@@ -256,7 +254,7 @@ impl Stage for NeighbourGrid {
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), sph_core::SetupError> {
         if self.count {
-            ensure_component::<Fluid, NeighbourCount>(&mut sim.world);
+            ensure_component::<Fluid, NeighbourCount>(sim);
         }
         let support = sim.constants.support();
         let (lo, hi) = sim.constants.domain;
@@ -302,13 +300,35 @@ impl NeighbourGrid {
         let pad = DVec2::splat(support);
         nb.grid.shape((lo - pad, hi + pad), support / REACH as f64);
         if self.sort_every > 0 && self.calls.is_multiple_of(self.sort_every as u64) {
-            let grid = &nb.grid;
+            let standard;
+            let kinds = match sim.resources.get::<ColumnKinds>() {
+                Some(kinds) => kinds,
+                None => {
+                    standard = ColumnKinds::default();
+                    &standard
+                }
+            };
+            // The sort borrows the grid's buffers, which `rebuild` overwrites below.
+            let grid = &mut nb.grid;
+            let (mut cells, mut start, mut order) = (
+                std::mem::take(&mut grid.cells),
+                std::mem::take(&mut grid.start),
+                std::mem::take(&mut grid.particles),
+            );
+            let shape = &*grid;
             let sorted = sort_by_cell(
                 &sim.world,
-                grid.nx * grid.ny,
-                |x| grid.index_of(x),
-                &mut self.sort,
-            )?;
+                kinds,
+                shape.nx * shape.ny,
+                |x| shape.index_of(x),
+                SortBuffers {
+                    cells: &mut cells,
+                    start: &mut start,
+                    order: &mut order,
+                },
+            );
+            (grid.cells, grid.start, grid.particles) = (cells, start, order);
+            let sorted = sorted?;
             if !sorted {
                 sim.diagnostics.insert("cell_sort_skipped".into(), 1.0);
             }

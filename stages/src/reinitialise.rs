@@ -18,7 +18,6 @@ use sph_core::components::Density;
 use sph_core::kernel::Kernel;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::world::Particles;
 use sph_core::{with_kernel, StageRegistry};
 
 /// The density filter.
@@ -43,18 +42,12 @@ pub fn register(registry: &mut StageRegistry) {
     registry.register(
         "reinitialise",
         "Shepard or MLS density re-initialisation (use every: N)",
-        |p: Params| {
-            Ok(Reinitialise {
-                filter: p.filter,
-                filtered: Vec::new(),
-            })
-        },
+        |p: Params| Ok(Reinitialise { filter: p.filter }),
     );
 }
 
 pub struct Reinitialise {
     filter: Filter,
-    filtered: Vec<f64>,
 }
 
 impl Stage for Reinitialise {
@@ -67,76 +60,79 @@ impl Stage for Reinitialise {
     }
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
-        let filtered = &mut self.filtered;
         let filter = self.filter;
-        let done = with_packed(sim, Fill::Basic, |sim, _, all| {
-            let Some(nb) = sim.resources.get::<Neighbours>() else {
-                return Ok(false);
-            };
-            let c = &sim.constants;
-            filtered.resize(nb.n_fluid, 0.0);
-            let x8 = WendlandX8::detect(c.kernel, c.h);
-            if x8.is_some() {
-                nb.check_covers(all.len())?;
-            }
-            with_kernel!(c.kernel, c.h, |k| {
-                let w0 = k.w(0.0);
-                filtered.par_iter_mut().enumerate().for_each(|(i, out)| {
-                    let Packed {
-                        x: xi,
-                        m: mi,
-                        rho: rhoi,
-                        ..
-                    } = all[i];
-                    if filter == Filter::Mls {
-                        let mut sums = MlsSums::default();
-                        sums.add(glam::DVec2::ZERO, w0, mi, rhoi);
+        // The sums read the densities packed before the pass, so each particle's new
+        // density can go straight into its column (no second buffer).
+        let done =
+            with_packed(sim, Fill::Basic, |sim, particles, all| {
+                let Some(nb) = sim.resources.get::<Neighbours>() else {
+                    return Ok(false);
+                };
+                let c = &sim.constants;
+                let x8 = WendlandX8::detect(c.kernel, c.h);
+                if x8.is_some() {
+                    nb.check_covers(all.len())?;
+                }
+                // Shift the leapfrog's half-step density by the same correction.
+                let mut rho = particles.fluid_mut::<Density>()?;
+                let mut half = particles.fluid.get::<&mut HalfDensity>();
+                if rho.len() != nb.n_fluid {
+                    return Err(StepError::Internal(format!(
+                        "the neighbour lists cover {} fluid particles but the world holds {}",
+                        nb.n_fluid,
+                        rho.len()
+                    )));
+                }
+                with_kernel!(c.kernel, c.h, |k| {
+                    let w0 = k.w(0.0);
+                    let filtered = |i: usize| -> f64 {
+                        let Packed {
+                            x: xi,
+                            m: mi,
+                            rho: rhoi,
+                            ..
+                        } = all[i];
+                        if filter == Filter::Mls {
+                            let mut sums = MlsSums::default();
+                            sums.add(glam::DVec2::ZERO, w0, mi, rhoi);
+                            for &j in nb.of(i) {
+                                let pj = &all[j as usize];
+                                let d = xi - pj.x;
+                                sums.add(d, k.w(d.length()), pj.m, pj.rho);
+                            }
+                            return sums.mls();
+                        }
+                        if let Some(x8) = x8 {
+                            return x8.shepard(all, nb.of(i), i);
+                        }
+                        let (mut num, mut den) = (mi * w0, mi / rhoi * w0);
                         for &j in nb.of(i) {
                             let pj = &all[j as usize];
-                            let d = xi - pj.x;
-                            sums.add(d, k.w(d.length()), pj.m, pj.rho);
+                            let w = k.w((xi - pj.x).length());
+                            num += pj.m * w;
+                            den += pj.m / pj.rho * w;
                         }
-                        *out = sums.mls();
-                        return;
+                        num / den
+                    };
+                    match half.as_deref_mut() {
+                        Some(half) => (&mut rho[..], half).into_par_iter().enumerate().for_each(
+                            |(i, (r, h))| {
+                                let f = filtered(i);
+                                h.0 += f - r.0;
+                                r.0 = f;
+                            },
+                        ),
+                        None => rho
+                            .par_iter_mut()
+                            .enumerate()
+                            .for_each(|(i, r)| r.0 = filtered(i)),
                     }
-                    if let Some(x8) = x8 {
-                        *out = x8.shepard(all, nb.of(i), i);
-                        return;
-                    }
-                    let (mut num, mut den) = (mi * w0, mi / rhoi * w0);
-                    for &j in nb.of(i) {
-                        let pj = &all[j as usize];
-                        let w = k.w((xi - pj.x).length());
-                        num += pj.m * w;
-                        den += pj.m / pj.rho * w;
-                    }
-                    *out = num / den;
                 });
-            });
-            Ok(true)
-        })?;
+                Ok(true)
+            })?;
         if done != Some(true) {
             return Ok(());
         }
-        let Some(particles) = Particles::of(&sim.world) else {
-            return Ok(());
-        };
-        // Shift the leapfrog's half-step density by the same correction.
-        let mut rho = particles.fluid_mut::<Density>()?;
-        let mut half = particles.fluid.get::<&mut HalfDensity>();
-        let filtered = &self.filtered[..];
-        match half.as_deref_mut() {
-            Some(half) => (&mut rho[..], half, filtered)
-                .into_par_iter()
-                .for_each(|(r, h, &f)| {
-                    h.0 += f - r.0;
-                    r.0 = f;
-                }),
-            None => (&mut rho[..], filtered)
-                .into_par_iter()
-                .for_each(|(r, &f)| r.0 = f),
-        }
-        drop((rho, half));
         refresh_ghost_density(sim)
     }
 }

@@ -8,49 +8,27 @@
 //! remapped through the inverse permutation so they stay consistent until `GhostWalls`
 //! rebuilds them at the next step.
 //!
-//! Only components listed in [`permute_fluid`] can be permuted. A fluid archetype that
-//! carries any other component (a plugin's per-particle state) is left unsorted, and
-//! the `cell_sort_skipped` diagnostic says so, rather than scrambling that column.
+//! Only components registered in the sim's [`ColumnKinds`] (the core's particle
+//! columns and every column a stage adds with `ensure_component`) can be permuted. A
+//! fluid archetype that carries any other component (a plugin's per-particle state
+//! inserted some other way) is left unsorted, and the `cell_sort_skipped` diagnostic
+//! says so, rather than scrambling that column.
 
-use crate::integrate::{HalfDensity, HalfVelocity};
 use rayon::prelude::*;
-use sph_core::components::{
-    Acceleration, Density, DensityRate, Fluid, Ghost, Mass, NeighbourCount, ParticleId, Position,
-    Pressure, Velocity,
-};
+use sph_core::components::{Fluid, Ghost, Position};
 use sph_core::stage::StepError;
-use sph_core::world::{archetype, column, column_mut, permute};
-use std::any::TypeId;
+use sph_core::world::{archetype, column, column_mut, ColumnKinds};
 
-/// Component types the sort knows how to permute; any other type in the fluid archetype
-/// disables sorting (see the module documentation).
-fn known(id: TypeId) -> bool {
-    [
-        TypeId::of::<Fluid>(),
-        TypeId::of::<ParticleId>(),
-        TypeId::of::<Position>(),
-        TypeId::of::<Velocity>(),
-        TypeId::of::<Density>(),
-        TypeId::of::<Pressure>(),
-        TypeId::of::<Mass>(),
-        TypeId::of::<Acceleration>(),
-        TypeId::of::<DensityRate>(),
-        TypeId::of::<NeighbourCount>(),
-        TypeId::of::<HalfVelocity>(),
-        TypeId::of::<HalfDensity>(),
-    ]
-    .contains(&id)
-}
-
-/// Reusable buffers of the sort (no allocation after the first sort of a run).
-#[derive(Default)]
-pub struct SortScratch {
-    cells: Vec<u32>,
-    start: Vec<u32>,
+/// The sort's working buffers. `NeighbourGrid` lends it the grid's own (cell per
+/// particle, cell starts, particle order), which the grid rebuild overwrites right
+/// after, so sorting holds no memory of its own.
+pub struct SortBuffers<'a> {
+    /// Each particle's cell, then (once sorted) the inverse permutation: old index ->
+    /// new index.
+    pub cells: &'a mut Vec<u32>,
+    pub start: &'a mut Vec<u32>,
     /// New position k holds the particle that was at `order[k]`.
-    order: Vec<u32>,
-    /// Inverse of `order`: old index -> new index.
-    inverse: Vec<u32>,
+    pub order: &'a mut Vec<u32>,
 }
 
 /// Reorders the fluid particles by `cell_of` (a cell index below `n_cells`), stably, so
@@ -59,14 +37,15 @@ pub struct SortScratch {
 /// sort does not know.
 pub fn sort_by_cell(
     world: &hecs::World,
+    kinds: &ColumnKinds,
     n_cells: usize,
     cell_of: impl Fn(glam::DVec2) -> usize + Sync,
-    scratch: &mut SortScratch,
+    scratch: SortBuffers,
 ) -> Result<bool, StepError> {
     let Some(fluid) = archetype::<Fluid>(world) else {
         return Ok(true);
     };
-    if !fluid.component_types().all(known) {
+    if !kinds.knows(fluid) {
         return Ok(false);
     }
     let n = fluid.len() as usize;
@@ -79,19 +58,14 @@ pub fn sort_by_cell(
             .zip(x.par_iter())
             .for_each(|(c, x)| *c = cell_of(x.0) as u32);
     }
-    counting_sort(
-        &scratch.cells,
-        n_cells,
-        &mut scratch.start,
-        &mut scratch.order,
-    );
-    scratch.inverse.resize(n, 0);
+    counting_sort(scratch.cells, n_cells, scratch.start, scratch.order);
+    // The cells are no longer needed: their buffer takes the inverse permutation.
+    let inverse = scratch.cells;
     for (new, &old) in scratch.order.iter().enumerate() {
-        scratch.inverse[old as usize] = new as u32;
+        inverse[old as usize] = new as u32;
     }
-    permute_fluid(fluid, &scratch.order)?;
+    kinds.permute(fluid, scratch.order)?;
     if let Some(ghost) = archetype::<Ghost>(world) {
-        let inverse = &scratch.inverse;
         column_mut::<Ghost>(ghost)?
             .par_iter_mut()
             .for_each(|g| g.source = inverse[g.source as usize]);
@@ -122,22 +96,6 @@ pub fn counting_sort(keys: &[u32], n_keys: usize, start: &mut Vec<u32>, order: &
         start[c] = start[c - 1];
     }
     start[0] = 0;
-}
-
-/// Applies `order` to every known fluid column (missing ones are skipped).
-fn permute_fluid(fluid: &hecs::Archetype, order: &[u32]) -> Result<(), StepError> {
-    permute::<ParticleId>(fluid, order)?;
-    permute::<Position>(fluid, order)?;
-    permute::<Velocity>(fluid, order)?;
-    permute::<Density>(fluid, order)?;
-    permute::<Pressure>(fluid, order)?;
-    permute::<Mass>(fluid, order)?;
-    permute::<Acceleration>(fluid, order)?;
-    permute::<DensityRate>(fluid, order)?;
-    permute::<NeighbourCount>(fluid, order)?;
-    permute::<HalfVelocity>(fluid, order)?;
-    permute::<HalfDensity>(fluid, order)?;
-    Ok(())
 }
 
 #[cfg(test)]

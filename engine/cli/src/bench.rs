@@ -113,7 +113,8 @@ pub struct Measurement {
     pub base_bytes: u64,
     /// Resident memory at the end of the run, the state still held (VmRSS) [bytes].
     pub end_bytes: u64,
-    /// Live heap at the end of the run, minus before loading (counting allocator).
+    /// Live heap at the end of the last step, every stage's buffers included, minus
+    /// before loading (counting allocator).
     pub heap_end: u64,
     /// Peak live heap during the run (setup included), minus before loading.
     pub heap_peak: u64,
@@ -130,8 +131,9 @@ impl Measurement {
     pub fn bytes_per_particle(&self) -> f64 {
         self.peak_bytes.saturating_sub(self.base_bytes) as f64 / self.particles.max(1) as f64
     }
-    /// Live heap while stepping (at the end of the run) per fluid particle: the
-    /// state, lists and buffers the run holds, without the transient peak of setup.
+    /// Live heap while stepping (at the end of the last step) per fluid particle: the
+    /// state, lists and stage buffers the run holds, without the transient peak of
+    /// setup.
     pub fn steady_bytes_per_particle(&self) -> f64 {
         self.heap_end as f64 / self.particles.max(1) as f64
     }
@@ -147,11 +149,15 @@ impl Measurement {
     }
 }
 
-/// Ends the run after a fixed number of steps (placed last in the pipeline, after
-/// `Integrate`, so the last step is an ordinary one).
+/// Placed last in the pipeline, after `Integrate`: records the live heap at the end
+/// of every step (while every stage still holds its buffers) and, with `steps > 0`,
+/// ends the run after that many steps, so the last step is an ordinary one.
 struct BenchStop {
     steps: u64,
 }
+
+/// Live heap at the end of the last step, recorded by [`BenchStop`].
+static LIVE_WHILE_STEPPING: AtomicUsize = AtomicUsize::new(0);
 
 #[derive(Debug, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -164,7 +170,8 @@ impl Stage for BenchStop {
         "bench_stop"
     }
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
-        if sim.clock.step >= self.steps {
+        LIVE_WHILE_STEPPING.store(heap_bytes().0, Ordering::Relaxed);
+        if self.steps > 0 && sim.clock.step >= self.steps {
             sim.clock.end_time = sim.clock.time;
         }
         Ok(())
@@ -260,12 +267,12 @@ pub fn run_case(
     );
     let across = ((2 * case.particles) as f64).sqrt().round() as usize;
     let mut overrides: Vec<String> = vec![format!("resolution=ParticlesAcross({across})")];
+    // Append BenchStop as the pipeline's last entry: before the file's last `]`.
+    let at = text
+        .rfind(']')
+        .ok_or("the scenario has no pipeline list to append BenchStop to")?;
+    text.insert_str(at, &format!("BenchStop(steps: {}),\n", case.steps));
     if case.steps > 0 {
-        // Append BenchStop as the pipeline's last entry: before the file's last `]`.
-        let at = text
-            .rfind(']')
-            .ok_or("the scenario has no pipeline list to append BenchStop to")?;
-        text.insert_str(at, &format!("BenchStop(steps: {}),\n", case.steps));
         // BenchStop ends the run; the end time only has to lie beyond the steps (a few
         // hundred at dt ~ 1e-4 s) and keep the probes' and frames' row counts inside
         // the engine's size limits, which an unbounded end time would break.
@@ -286,15 +293,14 @@ pub fn run_case(
         &registry,
     )
     .map_err(|e| e.to_string())?;
-    if case.steps > 0
-        && scenario.spec.pipeline.last().map(|e| e.name.as_str()) != Some("bench_stop")
-    {
+    if scenario.spec.pipeline.last().map(|e| e.name.as_str()) != Some("bench_stop") {
         return Err("BenchStop did not land at the end of the pipeline".into());
     }
     let opts = RunOptions::quiet(out, case.threads);
     let (summary, sim) = run_keeping_state(scenario, &opts).map_err(|e| e.to_string())?;
     let end_bytes = proc_status("VmRSS:");
-    let (heap_end, heap_peak) = heap_bytes();
+    let heap_peak = heap_bytes().1;
+    let heap_end = LIVE_WHILE_STEPPING.load(Ordering::Relaxed);
     let pairs = sim
         .resources
         .get::<Neighbours>()
