@@ -1,12 +1,12 @@
 //! ParaView particle frames: VTK XML PolyData (`.vtp`, inline base64 binary) and a `.pvd` time index.
 
 use std::fmt::Write as _;
-use std::io;
+use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 
 use glam::DVec2;
 
-use super::atomic::write_atomic;
+use super::atomic::{write_atomic, write_atomic_with};
 
 /// Per-particle arrays of one frame; every non-empty array has one entry per position.
 pub struct FrameFields<'a> {
@@ -22,13 +22,21 @@ pub struct FrameFields<'a> {
 
 /// Writes one frame as a `.vtp` file (points at z = 0, one vertex cell per point), atomically.
 ///
+/// The document is streamed to the file (base64 in small chunks), so writing a frame
+/// holds no copy of it in memory.
+///
 /// Fails with `InvalidInput` if an array length differs from the number of positions.
 pub fn write_vtp(path: &Path, f: &FrameFields) -> io::Result<()> {
-    let bytes = vtp_document(f)?;
-    write_atomic(path, bytes.as_bytes())
+    check_frame(f)?;
+    write_atomic_with(path, |tmp| {
+        let mut w = io::BufWriter::new(std::fs::File::create(tmp)?);
+        write_vtp_document(&mut w, f)?;
+        w.flush()
+    })
 }
 
-fn vtp_document(f: &FrameFields) -> io::Result<String> {
+/// Checks every array of `f` against the number of positions.
+fn check_frame(f: &FrameFields) -> io::Result<()> {
     let n = f.positions.len();
     check_len("velocity", f.velocity.len(), n)?;
     check_len("density", f.density.len(), n)?;
@@ -39,144 +47,195 @@ fn vtp_document(f: &FrameFields) -> io::Result<String> {
     for (name, values) in f.extra_scalars {
         check_len(name, values.len(), n)?;
     }
-    let n_i32 = i32::try_from(n).map_err(|_| invalid(format!("too many points: {n}")))?;
-
-    // Base64 output is 4/3 of the input; ~80 bytes per point for the fixed arrays.
-    let mut s = String::with_capacity(1024 + n * (110 + 11 * f.extra_scalars.len()));
-    s.push_str("<?xml version=\"1.0\"?>\n");
-    s.push_str(
-        "<VTKFile type=\"PolyData\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt32\">\n",
-    );
-    s.push_str("  <PolyData>\n");
-    let _ = writeln!(
-        s,
-        "    <Piece NumberOfPoints=\"{n}\" NumberOfVerts=\"{n}\" NumberOfLines=\"0\" NumberOfStrips=\"0\" NumberOfPolys=\"0\">"
-    );
-
-    s.push_str("      <PointData Scalars=\"pressure\" Vectors=\"velocity\">\n");
-    let mut buf = Vec::with_capacity(n * 24);
-    buf.extend(
-        f.velocity
-            .iter()
-            .flat_map(|v| [v.x, v.y, 0.0])
-            .flat_map(f64::to_le_bytes),
-    );
-    data_array(&mut s, "Float64", "velocity", 3, &buf)?;
-    float_array(&mut s, &mut buf, "density", f.density)?;
-    float_array(&mut s, &mut buf, "pressure", f.pressure)?;
-    if !f.neighbours.is_empty() {
-        buf.clear();
-        buf.extend(f.neighbours.iter().flat_map(|v| v.to_le_bytes()));
-        data_array(&mut s, "UInt32", "neighbours", 1, &buf)?;
-    }
-    for (name, values) in f.extra_scalars {
-        float_array(&mut s, &mut buf, &xml_escape(name), values)?;
-    }
-    s.push_str("      </PointData>\n");
-
-    s.push_str("      <Points>\n");
-    buf.clear();
-    buf.extend(
-        f.positions
-            .iter()
-            .flat_map(|p| [p.x, p.y, 0.0])
-            .flat_map(f64::to_le_bytes),
-    );
-    data_array(&mut s, "Float64", "Points", 3, &buf)?;
-    s.push_str("      </Points>\n");
-
-    s.push_str("      <Verts>\n");
-    buf.clear();
-    buf.extend((0..n_i32).flat_map(i32::to_le_bytes));
-    data_array(&mut s, "Int32", "connectivity", 1, &buf)?;
-    buf.clear();
-    buf.extend((1..=n_i32).flat_map(i32::to_le_bytes));
-    data_array(&mut s, "Int32", "offsets", 1, &buf)?;
-    s.push_str("      </Verts>\n");
-
-    s.push_str("    </Piece>\n  </PolyData>\n</VTKFile>\n");
-    Ok(s)
-}
-
-fn float_array(s: &mut String, buf: &mut Vec<u8>, name: &str, values: &[f64]) -> io::Result<()> {
-    buf.clear();
-    buf.extend(values.iter().flat_map(|v| v.to_le_bytes()));
-    data_array(s, "Float64", name, 1, buf)
-}
-
-/// One `<DataArray format="binary">`: base64 of (UInt32 byte count ++ raw little-endian data).
-fn data_array(
-    s: &mut String,
-    ty: &str,
-    name: &str,
-    components: u32,
-    data: &[u8],
-) -> io::Result<()> {
-    let len =
-        u32::try_from(data.len()).map_err(|_| invalid(format!("array {name} exceeds 4 GiB")))?;
-    let _ = write!(
-        s,
-        "        <DataArray type=\"{ty}\" Name=\"{name}\" NumberOfComponents=\"{components}\" format=\"binary\">"
-    );
-    let mut encoder = Base64::default();
-    encoder.push(s, &len.to_le_bytes());
-    encoder.push(s, data);
-    encoder.finish(s);
-    s.push_str("</DataArray>\n");
+    i32::try_from(n).map_err(|_| invalid(format!("too many points: {n}")))?;
     Ok(())
 }
 
-/// Streaming standard base64 (RFC 4648, with padding).
-#[derive(Default)]
-struct Base64 {
+fn write_vtp_document(w: &mut impl Write, f: &FrameFields) -> io::Result<()> {
+    let n = f.positions.len();
+    let n_i32 = n as i32; // checked by `check_frame`
+    w.write_all(b"<?xml version=\"1.0\"?>\n")?;
+    w.write_all(
+        b"<VTKFile type=\"PolyData\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt32\">\n",
+    )?;
+    w.write_all(b"  <PolyData>\n")?;
+    writeln!(
+        w,
+        "    <Piece NumberOfPoints=\"{n}\" NumberOfVerts=\"{n}\" NumberOfLines=\"0\" NumberOfStrips=\"0\" NumberOfPolys=\"0\">"
+    )?;
+
+    w.write_all(b"      <PointData Scalars=\"pressure\" Vectors=\"velocity\">\n")?;
+    data_array(
+        w,
+        "Float64",
+        "velocity",
+        3,
+        f.velocity.iter().map(|&v| xyz(v)),
+    )?;
+    data_array(
+        w,
+        "Float64",
+        "density",
+        1,
+        f.density.iter().map(|v| v.to_le_bytes()),
+    )?;
+    data_array(
+        w,
+        "Float64",
+        "pressure",
+        1,
+        f.pressure.iter().map(|v| v.to_le_bytes()),
+    )?;
+    if !f.neighbours.is_empty() {
+        let counts = f.neighbours.iter().map(|v| v.to_le_bytes());
+        data_array(w, "UInt32", "neighbours", 1, counts)?;
+    }
+    for (name, values) in f.extra_scalars {
+        let values = values.iter().map(|v| v.to_le_bytes());
+        data_array(w, "Float64", &xml_escape(name), 1, values)?;
+    }
+    w.write_all(b"      </PointData>\n")?;
+
+    w.write_all(b"      <Points>\n")?;
+    data_array(
+        w,
+        "Float64",
+        "Points",
+        3,
+        f.positions.iter().map(|&p| xyz(p)),
+    )?;
+    w.write_all(b"      </Points>\n")?;
+
+    w.write_all(b"      <Verts>\n")?;
+    let connectivity = (0..n_i32).map(i32::to_le_bytes);
+    data_array(w, "Int32", "connectivity", 1, connectivity)?;
+    let offsets = (0..n_i32).map(|k| (k + 1).to_le_bytes());
+    data_array(w, "Int32", "offsets", 1, offsets)?;
+    w.write_all(b"      </Verts>\n")?;
+
+    w.write_all(b"    </Piece>\n  </PolyData>\n</VTKFile>\n")
+}
+
+/// A 2D vector as the little-endian bytes of (x, y, 0).
+fn xyz(v: DVec2) -> [u8; 24] {
+    let mut b = [0; 24];
+    b[..8].copy_from_slice(&v.x.to_le_bytes());
+    b[8..16].copy_from_slice(&v.y.to_le_bytes());
+    b
+}
+
+/// One `<DataArray format="binary">`: base64 of (UInt32 byte count ++ the items'
+/// little-endian bytes), streamed.
+fn data_array<const B: usize>(
+    w: &mut impl Write,
+    ty: &str,
+    name: &str,
+    components: u32,
+    items: impl ExactSizeIterator<Item = [u8; B]>,
+) -> io::Result<()> {
+    let len = u32::try_from(items.len() * B)
+        .map_err(|_| invalid(format!("array {name} exceeds 4 GiB")))?;
+    write!(
+        w,
+        "        <DataArray type=\"{ty}\" Name=\"{name}\" NumberOfComponents=\"{components}\" format=\"binary\">"
+    )?;
+    let mut encoder = Base64::new(w);
+    encoder.push(&len.to_le_bytes())?;
+    // Items gathered into a small buffer, encoded a buffer at a time.
+    let mut stage = [0u8; 768];
+    let mut k = 0;
+    for item in items {
+        if k + B > stage.len() {
+            encoder.push(&stage[..k])?;
+            k = 0;
+        }
+        stage[k..k + B].copy_from_slice(&item);
+        k += B;
+    }
+    encoder.push(&stage[..k])?;
+    encoder.finish()?;
+    w.write_all(b"</DataArray>\n")
+}
+
+/// Streaming standard base64 (RFC 4648, with padding) into a writer.
+struct Base64<'w, W: Write> {
+    out: &'w mut W,
     pending: [u8; 3],
     n_pending: usize,
+    /// Encoded characters not yet written.
+    text: [u8; 1024],
+    n_text: usize,
 }
 
 const B64: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
 
-impl Base64 {
-    fn push(&mut self, out: &mut String, mut data: &[u8]) {
+impl<'w, W: Write> Base64<'w, W> {
+    fn new(out: &'w mut W) -> Self {
+        Self {
+            out,
+            pending: [0; 3],
+            n_pending: 0,
+            text: [0; 1024],
+            n_text: 0,
+        }
+    }
+
+    fn push(&mut self, mut data: &[u8]) -> io::Result<()> {
         if self.n_pending > 0 {
             while self.n_pending < 3 {
                 let Some((&b, rest)) = data.split_first() else {
-                    return;
+                    return Ok(());
                 };
                 self.pending[self.n_pending] = b;
                 self.n_pending += 1;
                 data = rest;
             }
             let p = self.pending;
-            encode_triple(out, p[0], p[1], p[2], 4);
+            self.triple(p[0], p[1], p[2], 4)?;
             self.n_pending = 0;
         }
         let mut chunks = data.chunks_exact(3);
         for c in &mut chunks {
-            encode_triple(out, c[0], c[1], c[2], 4);
+            self.triple(c[0], c[1], c[2], 4)?;
         }
         let rest = chunks.remainder();
         self.pending[..rest.len()].copy_from_slice(rest);
         self.n_pending = rest.len();
+        Ok(())
     }
 
-    fn finish(self, out: &mut String) {
+    fn finish(mut self) -> io::Result<()> {
         let p = self.pending;
         match self.n_pending {
-            1 => encode_triple(out, p[0], 0, 0, 2),
-            2 => encode_triple(out, p[0], p[1], 0, 3),
-            _ => return,
+            1 => self.triple(p[0], 0, 0, 2)?,
+            2 => self.triple(p[0], p[1], 0, 3)?,
+            _ => {}
         }
-        for _ in self.n_pending..3 {
-            out.push('=');
+        if self.n_pending > 0 {
+            for _ in self.n_pending..3 {
+                self.put(b'=')?;
+            }
         }
+        self.out.write_all(&self.text[..self.n_text])
     }
-}
 
-/// Appends the first `chars` base64 characters of the 24-bit group `a b c`.
-fn encode_triple(out: &mut String, a: u8, b: u8, c: u8, chars: usize) {
-    let v = (u32::from(a) << 16) | (u32::from(b) << 8) | u32::from(c);
-    for i in 0..chars {
-        out.push(char::from(B64[((v >> (18 - 6 * i)) & 63) as usize]));
+    /// The first `chars` base64 characters of the 24-bit group `a b c`.
+    fn triple(&mut self, a: u8, b: u8, c: u8, chars: usize) -> io::Result<()> {
+        let v = (u32::from(a) << 16) | (u32::from(b) << 8) | u32::from(c);
+        for i in 0..chars {
+            self.put(B64[((v >> (18 - 6 * i)) & 63) as usize])?;
+        }
+        Ok(())
+    }
+
+    fn put(&mut self, ch: u8) -> io::Result<()> {
+        if self.n_text == self.text.len() {
+            self.out.write_all(&self.text)?;
+            self.n_text = 0;
+        }
+        self.text[self.n_text] = ch;
+        self.n_text += 1;
+        Ok(())
     }
 }
 
@@ -338,6 +397,14 @@ mod tests {
         assert!(write_segments_vtp(&path, &[(DVec2::NAN, DVec2::ZERO)]).is_err());
     }
 
+    /// The document `write_vtp` would write, in memory.
+    fn vtp_document(f: &FrameFields) -> io::Result<String> {
+        check_frame(f)?;
+        let mut out = Vec::new();
+        write_vtp_document(&mut out, f)?;
+        Ok(String::from_utf8(out).unwrap())
+    }
+
     fn b64_decode(s: &str) -> Vec<u8> {
         let val = |c: u8| B64.iter().position(|&x| x == c).unwrap() as u32;
         let mut out = Vec::new();
@@ -383,11 +450,12 @@ mod tests {
         ] {
             // Split pushes exercise the carry-over between calls.
             for split in 0..=input.len() {
-                let mut out = String::new();
-                let mut e = Base64::default();
-                e.push(&mut out, &input.as_bytes()[..split]);
-                e.push(&mut out, &input.as_bytes()[split..]);
-                e.finish(&mut out);
+                let mut out = Vec::new();
+                let mut e = Base64::new(&mut out);
+                e.push(&input.as_bytes()[..split]).unwrap();
+                e.push(&input.as_bytes()[split..]).unwrap();
+                e.finish().unwrap();
+                let out = String::from_utf8(out).unwrap();
                 assert_eq!(out, expected, "input {input:?} split {split}");
                 assert_eq!(b64_decode(&out), input.as_bytes());
             }
