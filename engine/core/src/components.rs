@@ -12,6 +12,15 @@ macro_rules! component {
         #[derive(Clone, Copy, Debug, Default, PartialEq)]
         #[repr(transparent)]
         pub struct $name(pub $ty);
+
+        impl $name {
+            /// A column of these as the plain values, without a copy.
+            pub fn values(column: &[Self]) -> &[$ty] {
+                // SAFETY: `#[repr(transparent)]` gives the type exactly the layout of
+                // its one field, so the slices have the same length and layout.
+                unsafe { std::slice::from_raw_parts(column.as_ptr().cast(), column.len()) }
+            }
+        }
     };
 }
 

@@ -5,7 +5,6 @@ use crate::output::vtk::{write_vtp, FrameFields};
 use crate::sim::Sim;
 use crate::stage::StepError;
 use crate::world::{archetype, column};
-use glam::DVec2;
 use std::path::Path;
 
 /// Writes the fluid particles (position, velocity, density, pressure, `particle_id`
@@ -19,14 +18,7 @@ pub fn write_fluid_frame(sim: &Sim, path: &Path) -> Result<(), StepError> {
     let vel = column::<Velocity>(arch)?;
     let rho = column::<Density>(arch)?;
     let p = column::<Pressure>(arch)?;
-    let positions: Vec<DVec2> = pos.iter().map(|x| x.0).collect();
-    let velocity: Vec<DVec2> = vel.iter().map(|v| v.0).collect();
-    let density: Vec<f64> = rho.iter().map(|r| r.0).collect();
-    let pressure: Vec<f64> = p.iter().map(|q| q.0).collect();
-    let neighbours: Vec<u32> = arch
-        .get::<&NeighbourCount>()
-        .map(|c| c.iter().map(|n| n.0).collect())
-        .unwrap_or_default();
+    let neighbours = arch.get::<&NeighbourCount>();
     // Particles are reordered by the neighbour grid's cell sort, so the id (creation
     // index) is what follows a particle from frame to frame.
     let ids: Vec<f64> = arch
@@ -35,11 +27,11 @@ pub fn write_fluid_frame(sim: &Sim, path: &Path) -> Result<(), StepError> {
         .unwrap_or_default();
     let extras = [("particle_id", &ids[..])];
     let fields = FrameFields {
-        positions: &positions,
-        velocity: &velocity,
-        density: &density,
-        pressure: &pressure,
-        neighbours: &neighbours,
+        positions: Position::values(&pos),
+        velocity: Velocity::values(&vel),
+        density: Density::values(&rho),
+        pressure: Pressure::values(&p),
+        neighbours: neighbours.as_deref().map_or(&[], NeighbourCount::values),
         extra_scalars: if ids.is_empty() { &[] } else { &extras },
     };
     write_vtp(path, &fields).map_err(|e| StepError::output(path, e))
