@@ -228,21 +228,21 @@ fn optional_chunks<T: Send>(
     out: &mut [T],
     n: usize,
 ) -> impl IndexedParallelIterator<Item = Option<&mut [T]>> {
-    optional_outputs(out, n.div_ceil(CHUNK), CHUNK)
+    optional_outputs(out, n, CHUNK)
 }
 
-/// `count` pieces of `per` elements of an optional output: the slice's own pieces if
-/// it holds them all, else as many `None`s (the output is not wanted).
+/// Pieces of `per` elements of an optional output of `len` elements: the slice's own
+/// pieces if it holds exactly `len`, else as many `None`s (the output is not wanted).
 fn optional_outputs<T: Send>(
     out: &mut [T],
-    count: usize,
+    len: usize,
     per: usize,
 ) -> impl IndexedParallelIterator<Item = Option<&mut [T]>> {
     use rayon::iter::Either;
-    if out.len().div_ceil(per) == count && !out.is_empty() {
+    if out.len() == len && len > 0 {
         Either::Left(out.par_chunks_mut(per).map(Some))
     } else {
-        Either::Right((0..count).into_par_iter().map(|_| None))
+        Either::Right((0..len.div_ceil(per)).into_par_iter().map(|_| None))
     }
 }
 

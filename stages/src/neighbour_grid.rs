@@ -16,7 +16,9 @@ use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::{Fluid, Ghost, NeighbourCount, Position};
 use sph_core::sim::Sim;
 use sph_core::stage::{Stage, StepError};
-use sph_core::world::{archetype, column, column_mut, ensure_component, ColumnKinds, Joined};
+use sph_core::world::{
+    archetype, column, column_mut, count, ensure_component, ColumnKinds, Joined,
+};
 use sph_core::StageRegistry;
 
 /// Fluid particles per parallel block when building the lists (a power of two, so
@@ -78,6 +80,16 @@ const MAX_CELLS: f64 = 1e8;
 /// Rows (and columns) of cells searched around a particle.
 const ROWS: usize = 2 * REACH + 1;
 
+/// Resizes `v` to `n` elements; when its capacity must grow, to `n` and an eighth more,
+/// not by doubling: these buffers keep their capacity from step to step, so doubling
+/// would hold up to twice the memory needed.
+pub(crate) fn resize_by_eighths<T: Clone>(v: &mut Vec<T>, n: usize, value: T) {
+    if n > v.capacity() {
+        v.reserve_exact(n + n / 8 - v.len());
+    }
+    v.resize(n, value);
+}
+
 /// A uniform grid of cells over the domain, each listing the particles inside it.
 #[derive(Default)]
 pub struct CellGrid {
@@ -128,7 +140,7 @@ impl CellGrid {
     fn rebuild(&mut self, positions: Joined<Position>) {
         let n = positions.len();
         let mut cells = std::mem::take(&mut self.cells);
-        cells.resize(n, 0);
+        resize_by_eighths(&mut cells, n, 0);
         cells
             .par_iter_mut()
             .enumerate()
@@ -140,8 +152,8 @@ impl CellGrid {
             &mut self.particles,
         );
         self.cells = cells;
-        self.xs.resize(n, 0.0);
-        self.ys.resize(n, 0.0);
+        resize_by_eighths(&mut self.xs, n, 0.0);
+        resize_by_eighths(&mut self.ys, n, 0.0);
         (&mut self.xs[..], &mut self.ys[..], &self.particles[..])
             .into_par_iter()
             .for_each(|(x, y, &j)| {
@@ -308,8 +320,14 @@ impl NeighbourGrid {
                     &standard
                 }
             };
-            // The sort borrows the grid's buffers, which `rebuild` overwrites below.
+            // The sort borrows the grid's buffers, which `rebuild` overwrites below; sized
+            // first for the rebuild (fluid and ghosts), or the sort's fluid-only size
+            // and the rebuild's growth would double them.
             let grid = &mut nb.grid;
+            let joint = count::<Fluid>(&sim.world) + count::<Ghost>(&sim.world);
+            for buffer in [&mut grid.cells, &mut grid.particles] {
+                buffer.reserve_exact(joint.saturating_sub(buffer.len()));
+            }
             let (mut cells, mut start, mut order) = (
                 std::mem::take(&mut grid.cells),
                 std::mem::take(&mut grid.start),

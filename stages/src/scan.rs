@@ -9,7 +9,7 @@
 //! test is the same arithmetic in both (dx*dx + dy*dy < r_s^2, no fused multiply-add),
 //! so a run's numbers do not depend on which one the machine uses.
 
-use crate::neighbour_grid::{CellGrid, NeighbourBlock};
+use crate::neighbour_grid::{resize_by_eighths, CellGrid, NeighbourBlock};
 use glam::DVec2;
 use sph_core::components::Position;
 use std::ops::Range;
@@ -116,14 +116,7 @@ fn build_block(
         let ranges = grid.ranges_near(xi);
         let base = block.list.len();
         let total: usize = ranges.iter().map(|r| r.len()).sum();
-        // Grow by an eighth rather than by doubling: the lists keep their capacity
-        // from step to step, so doubling would hold up to twice the memory needed.
-        let need = base + total;
-        if need > block.list.capacity() {
-            let more = (need - block.list.len()).max(block.list.len() / 8);
-            block.list.reserve_exact(more);
-        }
-        block.list.resize(need, 0);
+        resize_by_eighths(&mut block.list, base + total, 0);
         let mut len = base;
         for cand in ranges {
             let c = Candidates {

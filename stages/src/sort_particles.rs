@@ -14,6 +14,7 @@
 //! inserted some other way) is left unsorted, and the `cell_sort_skipped` diagnostic
 //! says so, rather than scrambling that column.
 
+use crate::neighbour_grid::resize_by_eighths;
 use rayon::prelude::*;
 use sph_core::components::{Fluid, Ghost, Position};
 use sph_core::stage::StepError;
@@ -51,7 +52,7 @@ pub fn sort_by_cell(
     let n = fluid.len() as usize;
     {
         let x = column::<Position>(fluid)?;
-        scratch.cells.resize(n, 0);
+        resize_by_eighths(scratch.cells, n, 0);
         scratch
             .cells
             .par_iter_mut()
@@ -84,7 +85,7 @@ pub fn counting_sort(keys: &[u32], n_keys: usize, start: &mut Vec<u32>, order: &
     for c in 0..n_keys {
         start[c + 1] += start[c];
     }
-    order.resize(keys.len(), 0);
+    resize_by_eighths(order, keys.len(), 0);
     // `start[c]` is advanced while filling and restored afterwards, so no second
     // buffer is needed.
     for (j, &c) in keys.iter().enumerate() {

@@ -52,7 +52,7 @@ fn missing<T>() -> StepError {
 /// Reorders column `T` of `arch` so that new entry k is old entry `order[k]` (a
 /// permutation of `0..arch.len()`). Returns false when the archetype has no `T`.
 /// Allocates one temporary column; callers sort every N steps, not every step.
-pub fn permute<T: Component + Copy>(arch: &Archetype, order: &[u32]) -> Result<bool, StepError> {
+pub fn permute<T: Component + Clone>(arch: &Archetype, order: &[u32]) -> Result<bool, StepError> {
     use rayon::prelude::*;
     let Some(mut col) = arch.get::<&mut T>() else {
         return Ok(false);
@@ -67,7 +67,7 @@ pub fn permute<T: Component + Copy>(arch: &Archetype, order: &[u32]) -> Result<b
     let old: Vec<T> = col.to_vec();
     col.par_iter_mut()
         .zip(order.par_iter())
-        .for_each(|(new, &k)| *new = old[k as usize]);
+        .for_each(|(new, &k)| *new = old[k as usize].clone());
     Ok(true)
 }
 
@@ -82,7 +82,7 @@ struct ColumnKind {
 }
 
 impl ColumnKind {
-    fn of<T: Component + Copy>() -> Self {
+    fn of<T: Component + Clone>() -> Self {
         Self {
             id: TypeId::of::<T>(),
             add: |batch| {
@@ -92,7 +92,7 @@ impl ColumnKind {
                 if let (Some(column), Some(mut writer)) = (from.get::<&T>(), to.writer::<T>()) {
                     for x in column.iter() {
                         // The batch was sized for this archetype: every push fits.
-                        let _ = writer.push(*x);
+                        let _ = writer.push(x.clone());
                     }
                 }
             },
@@ -132,7 +132,7 @@ impl Default for ColumnKinds {
 
 impl ColumnKinds {
     /// Adds `T` (once).
-    pub fn register<T: Component + Copy>(&mut self) {
+    pub fn register<T: Component + Clone>(&mut self) {
         if self.get(TypeId::of::<T>()).is_none() {
             self.0.push(ColumnKind::of::<T>());
         }
@@ -150,10 +150,15 @@ impl ColumnKinds {
     /// Applies `order` (new row k holds old row `order[k]`) to every column of `arch`,
     /// whose types must all be registered ([`ColumnKinds::knows`]).
     pub fn permute(&self, arch: &Archetype, order: &[u32]) -> Result<(), StepError> {
-        for id in arch.component_types() {
-            let kind = self.get(id).ok_or_else(|| {
+        // Checked before any column moves, so an error leaves the archetype as it was.
+        let kinds: Vec<&ColumnKind> = arch
+            .component_types()
+            .map(|id| self.get(id))
+            .collect::<Option<_>>()
+            .ok_or_else(|| {
                 StepError::Internal("permuting a column of an unregistered type".into())
             })?;
+        for kind in kinds {
             (kind.permute)(arch, order)?;
         }
         Ok(())
@@ -184,12 +189,12 @@ impl ColumnKinds {
 /// [`ColumnKinds`].
 ///
 /// hecs never frees an archetype's storage, and moving entities one by one grows an
-/// archetype by doubling (up to 1.6 times the particle columns, ~70 bytes per particle
-/// in the dam break). The world is therefore rebuilt: every archetype is copied,
+/// archetype by doubling (up to twice the particle columns; 1.64 times, ~70 bytes per
+/// particle, at the bench's sizes). The world is therefore rebuilt: every archetype is copied,
 /// column by column and at exactly its size, into a fresh world under the same entity
 /// handles and in the same order, with `T` added where it was missing, and the old
 /// world is dropped. Archetypes with an unregistered column move entity by entity.
-pub fn ensure_component<M: Component, T: Component + Copy + Default>(sim: &mut Sim) {
+pub fn ensure_component<M: Component, T: Component + Clone + Default>(sim: &mut Sim) {
     let kinds = sim
         .resources
         .get_mut::<ColumnKinds>()
@@ -211,7 +216,7 @@ pub fn ensure_component<M: Component, T: Component + Copy + Default>(sim: &mut S
 }
 
 /// `old`'s entities in a fresh world, with `T` (default) added to those with `M`.
-fn rebuilt_with<M: Component, T: Component + Copy + Default>(
+fn rebuilt_with<M: Component, T: Component + Clone + Default>(
     mut old: World,
     kinds: &ColumnKinds,
 ) -> World {
