@@ -17,7 +17,7 @@ use sph_core::components::{Fluid, Ghost, NeighbourCount, Position};
 use sph_core::sim::Sim;
 use sph_core::stage::{Stage, StepError};
 use sph_core::world::{
-    archetype, column, column_mut, count, ensure_component, ColumnKinds, Joined,
+    archetype, column, column_kinds, column_mut, count, ensure_component, ColumnKinds, Joined,
 };
 use sph_core::StageRegistry;
 
@@ -265,6 +265,8 @@ impl Stage for NeighbourGrid {
     }
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), sph_core::SetupError> {
+        // The cell sort permutes the registered columns.
+        column_kinds(&mut sim.resources);
         if self.count {
             ensure_component::<Fluid, NeighbourCount>(sim);
         }
@@ -312,14 +314,10 @@ impl NeighbourGrid {
         let pad = DVec2::splat(support);
         nb.grid.shape((lo - pad, hi + pad), support / REACH as f64);
         if self.sort_every > 0 && self.calls.is_multiple_of(self.sort_every as u64) {
-            let standard;
-            let kinds = match sim.resources.get::<ColumnKinds>() {
-                Some(kinds) => kinds,
-                None => {
-                    standard = ColumnKinds::default();
-                    &standard
-                }
-            };
+            let kinds = sim
+                .resources
+                .get::<ColumnKinds>()
+                .ok_or_else(|| StepError::Internal("NeighbourGrid ran without its setup".into()))?;
             // The sort borrows the grid's buffers, which `rebuild` overwrites below; sized
             // first for the rebuild (fluid and ghosts), or the sort's fluid-only size
             // and the rebuild's growth would double them.

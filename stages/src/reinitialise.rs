@@ -84,36 +84,7 @@ impl Stage for Reinitialise {
                     )));
                 }
                 with_kernel!(c.kernel, c.h, |k| {
-                    let w0 = k.w(0.0);
-                    let filtered = |i: usize| -> f64 {
-                        let Packed {
-                            x: xi,
-                            m: mi,
-                            rho: rhoi,
-                            ..
-                        } = all[i];
-                        if filter == Filter::Mls {
-                            let mut sums = MlsSums::default();
-                            sums.add(glam::DVec2::ZERO, w0, mi, rhoi);
-                            for &j in nb.of(i) {
-                                let pj = &all[j as usize];
-                                let d = xi - pj.x;
-                                sums.add(d, k.w(d.length()), pj.m, pj.rho);
-                            }
-                            return sums.mls();
-                        }
-                        if let Some(x8) = x8 {
-                            return x8.shepard(all, nb.of(i), i);
-                        }
-                        let (mut num, mut den) = (mi * w0, mi / rhoi * w0);
-                        for &j in nb.of(i) {
-                            let pj = &all[j as usize];
-                            let w = k.w((xi - pj.x).length());
-                            num += pj.m * w;
-                            den += pj.m / pj.rho * w;
-                        }
-                        num / den
-                    };
+                    let filtered = |i: usize| filtered_density(&k, filter, x8, all, nb, i);
                     match half.as_deref_mut() {
                         Some(half) => (&mut rho[..], half).into_par_iter().enumerate().for_each(
                             |(i, (r, h))| {
@@ -135,4 +106,45 @@ impl Stage for Reinitialise {
         }
         refresh_ghost_density(sim)
     }
+}
+
+/// Fluid particle `i`'s re-initialised density from the packed particles `all`: the
+/// Shepard filter sum_j m_j W_ij / sum_j (m_j/rho_j) W_ij over i and its neighbours
+/// (eight lanes at a time with `x8`), or the MLS filter.
+fn filtered_density<K: Kernel>(
+    k: &K,
+    filter: Filter,
+    x8: Option<WendlandX8>,
+    all: &[Packed],
+    nb: &Neighbours,
+    i: usize,
+) -> f64 {
+    let Packed {
+        x: xi,
+        m: mi,
+        rho: rhoi,
+        ..
+    } = all[i];
+    if filter == Filter::Mls {
+        let mut sums = MlsSums::default();
+        sums.add(glam::DVec2::ZERO, k.w(0.0), mi, rhoi);
+        for &j in nb.of(i) {
+            let pj = &all[j as usize];
+            let d = xi - pj.x;
+            sums.add(d, k.w(d.length()), pj.m, pj.rho);
+        }
+        return sums.mls();
+    }
+    if let Some(x8) = x8 {
+        return x8.shepard(all, nb.of(i), i);
+    }
+    let w0 = k.w(0.0);
+    let (mut num, mut den) = (mi * w0, mi / rhoi * w0);
+    for &j in nb.of(i) {
+        let pj = &all[j as usize];
+        let w = k.w((xi - pj.x).length());
+        num += pj.m * w;
+        den += pj.m / pj.rho * w;
+    }
+    num / den
 }

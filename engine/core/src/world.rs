@@ -9,7 +9,7 @@ use crate::components::{
     Acceleration, Density, DensityRate, Fluid, Ghost, Mass, NeighbourCount, ParticleId, Position,
     Pressure, Velocity,
 };
-use crate::sim::Sim;
+use crate::sim::{Resources, Sim};
 use crate::stage::StepError;
 use hecs::{
     Archetype, ArchetypeColumn, ArchetypeColumnMut, ColumnBatchBuilder, ColumnBatchType, Component,
@@ -104,7 +104,7 @@ impl ColumnKind {
 /// The component types whose columns the engine can copy and reorder as whole columns:
 /// [`ensure_component`] rebuilds an archetype of such types at exactly its size, and
 /// the cell sort (`NeighbourGrid(sort_every)`) permutes them. A resource of the [`Sim`]
-/// (created on first use with the core's per-particle components); every type a stage
+/// ([`column_kinds`] creates it with the core's per-particle components); every type a stage
 /// adds through [`ensure_component`] joins it. An archetype with any other column (a
 /// plugin's own per-particle state added some other way) is moved entity by entity and
 /// left unsorted, correct but slower.
@@ -142,6 +142,11 @@ impl ColumnKinds {
         self.0.iter().find(|k| k.id == id)
     }
 
+    /// The kinds of `arch`'s columns, or None when one is not registered.
+    fn kinds_of(&self, arch: &Archetype) -> Option<Vec<&ColumnKind>> {
+        arch.component_types().map(|id| self.get(id)).collect()
+    }
+
     /// Whether every column of `arch` is of a registered type.
     pub fn knows(&self, arch: &Archetype) -> bool {
         arch.component_types().all(|id| self.get(id).is_some())
@@ -151,13 +156,9 @@ impl ColumnKinds {
     /// whose types must all be registered ([`ColumnKinds::knows`]).
     pub fn permute(&self, arch: &Archetype, order: &[u32]) -> Result<(), StepError> {
         // Checked before any column moves, so an error leaves the archetype as it was.
-        let kinds: Vec<&ColumnKind> = arch
-            .component_types()
-            .map(|id| self.get(id))
-            .collect::<Option<_>>()
-            .ok_or_else(|| {
-                StepError::Internal("permuting a column of an unregistered type".into())
-            })?;
+        let kinds = self.kinds_of(arch).ok_or_else(|| {
+            StepError::Internal("permuting a column of an unregistered type".into())
+        })?;
         for kind in kinds {
             (kind.permute)(arch, order)?;
         }
@@ -167,12 +168,9 @@ impl ColumnKinds {
     /// A batch of exactly `arch.len()` rows holding `arch`'s columns plus `extra`'s
     /// (filled by the caller), or None when a column's type is not registered.
     fn copy(&self, arch: &Archetype, extra: Option<&ColumnKind>) -> Option<ColumnBatchBuilder> {
-        let kinds: Vec<&ColumnKind> = arch
-            .component_types()
-            .map(|id| self.get(id))
-            .collect::<Option<_>>()?;
+        let kinds = self.kinds_of(arch)?;
         let mut ty = ColumnBatchType::new();
-        for kind in kinds.iter().chain(extra.iter()) {
+        for kind in kinds.iter().copied().chain(extra) {
             (kind.add)(&mut ty);
         }
         let batch = ty.into_batch(arch.len());
@@ -181,6 +179,16 @@ impl ColumnKinds {
         }
         Some(batch)
     }
+}
+
+/// The sim's [`ColumnKinds`], created with the core's particle components on first use.
+pub fn column_kinds(resources: &mut Resources) -> &mut ColumnKinds {
+    if !resources.contains::<ColumnKinds>() {
+        resources.insert(ColumnKinds::default());
+    }
+    resources
+        .get_mut::<ColumnKinds>()
+        .expect("the column kinds were inserted just above")
 }
 
 /// Inserts component `T` (default value) into every entity carrying marker `M` that
@@ -195,14 +203,11 @@ impl ColumnKinds {
 /// handles and in the same order, with `T` added where it was missing, and the old
 /// world is dropped. Archetypes with an unregistered column move entity by entity.
 pub fn ensure_component<M: Component, T: Component + Clone + Default>(sim: &mut Sim) {
-    let kinds = sim
-        .resources
-        .get_mut::<ColumnKinds>()
-        .map(std::mem::take)
-        .unwrap_or_default();
-    let mut kinds = kinds;
+    let Sim {
+        world, resources, ..
+    } = sim;
+    let kinds = column_kinds(resources);
     kinds.register::<T>();
-    let world = &mut sim.world;
     let missing = world
         .query::<()>()
         .with::<&M>()
@@ -210,9 +215,8 @@ pub fn ensure_component<M: Component, T: Component + Clone + Default>(sim: &mut 
         .iter()
         .count();
     if missing > 0 {
-        *world = rebuilt_with::<M, T>(std::mem::take(world), &kinds);
+        *world = rebuilt_with::<M, T>(std::mem::take(world), kinds);
     }
-    sim.resources.insert(kinds);
 }
 
 /// `old`'s entities in a fresh world, with `T` (default) added to those with `M`.
