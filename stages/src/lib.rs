@@ -14,15 +14,14 @@ pub mod eos;
 pub mod forces;
 pub mod ghost_walls;
 pub mod integrate;
-pub mod mls;
 pub mod neighbour_grid;
-pub mod packed;
-pub mod pair_x8;
 pub mod probe;
+pub(crate) mod rates;
 pub mod reinitialise;
 pub mod scan;
 pub mod snapshots;
 pub mod sort_particles;
+pub mod terms;
 pub mod vtk_frames;
 
 use sph_core::StageRegistry;

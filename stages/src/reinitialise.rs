@@ -5,17 +5,15 @@
 //! density field and so does not lift a free surface when run often.
 //! Run it every N steps with the stage's `every: N`; leave the stage out for "never".
 
-use crate::continuity::require_neighbours;
 use crate::ghost_walls::refresh_ghost_density;
 use crate::integrate::HalfDensity;
-use crate::mls::MlsSums;
 use crate::neighbour_grid::Neighbours;
-use crate::packed::{with_packed, Fill, Packed};
-use crate::pair_x8::WendlandX8;
+use crate::terms::{mls::Mls, shepard::Shepard};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::components::Density;
 use sph_core::kernel::Kernel;
+use sph_core::pair::{with_records, PairTerm, Pass};
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::{with_kernel, StageRegistry};
@@ -56,51 +54,54 @@ impl Stage for Reinitialise {
     }
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
-        require_neighbours(sim, "reinitialise")
+        if sim.resources.contains::<Neighbours>() {
+            return Ok(());
+        }
+        Err(SetupError::new(
+            "reinitialise",
+            "needs neighbour lists: put NeighbourGrid() before it in the pipeline",
+        ))
     }
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
-        let filter = self.filter;
+        let _span = tracing::trace_span!("pair_sums").entered();
+        let reads = Shepard { w0: 0.0 }.reads().with(Mls { w0: 0.0 }.reads());
         // The sums read the densities packed before the pass, so each particle's new
         // density can go straight into its column (no second buffer).
-        let done =
-            with_packed(sim, Fill::Basic, |sim, particles, all| {
-                let Some(nb) = sim.resources.get::<Neighbours>() else {
-                    return Ok(false);
-                };
-                let c = &sim.constants;
-                let x8 = WendlandX8::detect(c.kernel, c.h);
-                if x8.is_some() {
-                    nb.check_covers(all.len())?;
-                }
-                // Shift the leapfrog's half-step density by the same correction.
-                let mut rho = particles.fluid_mut::<Density>()?;
-                let mut half = particles.fluid.get::<&mut HalfDensity>();
-                if rho.len() != nb.n_fluid {
-                    return Err(StepError::Internal(format!(
-                        "the neighbour lists cover {} fluid particles but the world holds {}",
-                        nb.n_fluid,
-                        rho.len()
-                    )));
-                }
-                with_kernel!(c.kernel, c.h, |k| {
-                    let filtered = |i: usize| filtered_density(&k, filter, x8, all, nb, i);
-                    match half.as_deref_mut() {
-                        Some(half) => (&mut rho[..], half).into_par_iter().enumerate().for_each(
-                            |(i, (r, h))| {
-                                let f = filtered(i);
-                                h.0 += f - r.0;
-                                r.0 = f;
-                            },
-                        ),
-                        None => rho
-                            .par_iter_mut()
-                            .enumerate()
-                            .for_each(|(i, r)| r.0 = filtered(i)),
+        let filter = self.filter;
+        let done = with_records(sim, reads, |sim, particles, records| {
+            let Some(nb) = sim.resources.get::<Neighbours>() else {
+                return Ok(false);
+            };
+            let c = &sim.constants;
+            // Shift the leapfrog's half-step density by the same correction.
+            let mut rho = particles.fluid_mut::<Density>()?;
+            let mut half = particles.fluid.get::<&mut HalfDensity>();
+            if rho.len() != nb.n_fluid {
+                return Err(StepError::Internal(format!(
+                    "the neighbour lists cover {} fluid particles but the world holds {}",
+                    nb.n_fluid,
+                    rho.len()
+                )));
+            }
+            with_kernel!(c.kernel, c.h, |k| {
+                let w0 = k.w(0.0);
+                match filter {
+                    Filter::Shepard => filter_all(
+                        &Shepard { w0 },
+                        k,
+                        records,
+                        nb,
+                        &mut rho,
+                        half.as_deref_mut(),
+                    ),
+                    Filter::Mls => {
+                        filter_all(&Mls { w0 }, k, records, nb, &mut rho, half.as_deref_mut())
                     }
-                });
-                Ok(true)
+                }
             })?;
+            Ok(true)
+        })?;
         if done != Some(true) {
             return Ok(());
         }
@@ -108,43 +109,31 @@ impl Stage for Reinitialise {
     }
 }
 
-/// Fluid particle `i`'s re-initialised density from the packed particles `all`: the
-/// Shepard filter sum_j m_j W_ij / sum_j (m_j/rho_j) W_ij over i and its neighbours
-/// (eight lanes at a time with `x8`), or the MLS filter.
-fn filtered_density<K: Kernel>(
-    k: &K,
-    filter: Filter,
-    x8: Option<WendlandX8>,
-    all: &[Packed],
+/// Writes every fluid particle's filtered density (the pair term `term`) into `rho`,
+/// and shifts the half-step density `half`, if any, by the same correction.
+fn filter_all<T: PairTerm<Out = f64>, K: Kernel>(
+    term: &T,
+    k: K,
+    records: &sph_core::pair::Records,
     nb: &Neighbours,
-    i: usize,
-) -> f64 {
-    let Packed {
-        x: xi,
-        m: mi,
-        rho: rhoi,
-        ..
-    } = all[i];
-    if filter == Filter::Mls {
-        let mut sums = MlsSums::default();
-        sums.add(glam::DVec2::ZERO, k.w(0.0), mi, rhoi);
-        for &j in nb.of(i) {
-            let pj = &all[j as usize];
-            let d = xi - pj.x;
-            sums.add(d, k.w(d.length()), pj.m, pj.rho);
-        }
-        return sums.mls();
+    rho: &mut [Density],
+    half: Option<&mut [HalfDensity]>,
+) -> Result<(), StepError> {
+    let pass = Pass::new(term, k, records).map_err(|e| StepError::Internal(e.to_string()))?;
+    let filtered = |i: usize| pass.sum(i, nb.of(i));
+    match half {
+        Some(half) => (rho, half)
+            .into_par_iter()
+            .enumerate()
+            .for_each(|(i, (r, h))| {
+                let f = filtered(i);
+                h.0 += f - r.0;
+                r.0 = f;
+            }),
+        None => rho
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(i, r)| r.0 = filtered(i)),
     }
-    if let Some(x8) = x8 {
-        return x8.shepard(all, nb.of(i), i);
-    }
-    let w0 = k.w(0.0);
-    let (mut num, mut den) = (mi * w0, mi / rhoi * w0);
-    for &j in nb.of(i) {
-        let pj = &all[j as usize];
-        let w = k.w((xi - pj.x).length());
-        num += pj.m * w;
-        den += pj.m / pj.rho * w;
-    }
-    num / den
+    Ok(())
 }

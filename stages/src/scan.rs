@@ -32,7 +32,7 @@ impl Scan {
     /// [`Scan::detect`]'s answer, worked out once per process.
     fn probe() -> Self {
         #[cfg(target_arch = "x86_64")]
-        if simd_allowed()
+        if sph_core::pair::simd_allowed()
             && std::arch::is_x86_feature_detected!("avx512f")
             && std::arch::is_x86_feature_detected!("avx512vl")
             && std::arch::is_x86_feature_detected!("popcnt")
@@ -67,13 +67,6 @@ impl Scan {
             Scan::Avx512 => unsafe { avx512::build_block(grid, fpos, r2max, range, block) },
         }
     }
-}
-
-/// False when the environment variable `SPH_NO_SIMD` is set (to anything): every
-/// stage then takes its portable scalar path, for comparisons and for results that
-/// agree bit for bit across processors (docs/performance.md).
-pub fn simd_allowed() -> bool {
-    std::env::var_os("SPH_NO_SIMD").is_none()
 }
 
 /// A reproducible stream of numbers in [0, 1) for the unit tests (a 64-bit linear

@@ -38,7 +38,7 @@ Scenario(
         GhostWalls(slip: FreeSlip),
         NeighbourGrid(),
         Eos(min_pressure: 0.0),
-        Forces(alpha: 0.03, with_continuity: true),
+        Forces(terms: [PressureGradient(), ArtificialViscosity(alpha: 0.03), Continuity()]),
         Integrate(courant: 0.25),
     ],
 )

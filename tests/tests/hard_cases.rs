@@ -28,12 +28,16 @@ const KERNELS: [&str; 5] = ["Gaussian", "Quadratic", "Cubic", "Quartic", "Wendla
 /// the Ritter front 2 sqrt(g H) = 4.85 m/s runs at Mach 0.4. `across` particles
 /// across the column, to `end` s; the first impact on the right wall is at t ~ 0.62 s.
 fn dam_break_c12(kernel: &str, artificial_pressure: bool, across: u32, end: f64) -> Stability {
+    let terms = match artificial_pressure {
+        true => "[PressureGradient(), ArtificialViscosity(), ArtificialPressure(), Continuity()]",
+        false => "[PressureGradient(), ArtificialViscosity(), Continuity()]",
+    };
     let overrides = [
         format!("resolution=ParticlesAcross({across})"),
         format!("end_time={end}"),
         "fluid.sound_speed=12.0".into(),
         format!("kernel={kernel}"),
-        format!("pipeline.forces.artificial_pressure={artificial_pressure}"),
+        format!("pipeline.forces.terms={terms}"),
         "pipeline.probe.max_speed=true".into(),
     ];
     let overrides: Vec<&str> = overrides.iter().map(String::as_str).collect();

@@ -1,7 +1,7 @@
 //! The optimised paths give the same physics as the straightforward ones: a dam break
 //! whose particles are re-sorted by cell every step (`NeighbourGrid(sort_every: 1)`)
 //! against one that keeps creation order (`sort_every: 0`); and the continuity
-//! equation summed inside the forces loop (`Forces(with_continuity: true)`, as shipped)
+//! equation summed inside the forces loop (`Forces(terms: [..., Continuity()])`, as shipped)
 //! against a separate `Continuity()` stage, which must agree bit for bit.
 //!
 //! Sorting changes only the order in which neighbour terms are summed, so the two runs
@@ -121,16 +121,19 @@ fn cell_sorting_changes_results_only_by_round_off() {
 
 #[test]
 fn continuity_in_the_forces_loop_is_bit_identical_to_the_separate_stage() {
-    let fused = "with_continuity: true";
-    assert!(
-        SCENE.contains(fused),
-        "dam_break.ron no longer fuses continuity"
-    );
+    // The Continuity() term inside Forces' term list (the line after the Forces line).
     let forces = SCENE.find("        Forces(").expect("a Forces stage");
+    let term = forces
+        + SCENE[forces..]
+            .find("Continuity(),")
+            .expect("a Continuity() term");
+    let line_end = term + SCENE[term..].find('\n').unwrap() + 1;
+    let line_start = SCENE[..term].rfind('\n').unwrap() + 1;
     let separate = format!(
-        "{}        Continuity(),\n{}",
+        "{}        Continuity(),\n{}{}",
         &SCENE[..forces],
-        SCENE[forces..].replacen(fused, "with_continuity: false", 1)
+        &SCENE[forces..line_start],
+        &SCENE[line_end..]
     );
     let (a, a_out) = run_scene(SCENE, 20, "fused");
     let (b, b_out) = run_scene(&separate, 20, "separate");

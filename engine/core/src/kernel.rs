@@ -3,29 +3,48 @@
 //! Each kernel is a small `Copy` value built once per run from the smoothing length
 //! `h`, holding its normalisation, so the hot loops are monomorphised over the kernel
 //! type through [`with_kernel!`](crate::with_kernel) instead of branching per pair.
+//! Its shape is written once over [`Lane`]: the scalar path evaluates it on `f64`,
+//! the SIMD pair sums eight neighbours at a time (`crate::pair`).
 
+use crate::pair::lane::{whole_pow, Lane};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 
-/// A radially symmetric 2D kernel W(r, h) with compact support.
+/// A radially symmetric 2D kernel W(r, h) with compact support, written once over
+/// [`Lane`] so the scalar and the SIMD pair sums evaluate the same definition.
 pub trait Kernel: Copy + Send + Sync + 'static {
     /// Support radius in metres: W = 0 for r >= support.
     fn support(&self) -> f64;
+    /// 1 / h.
+    fn inv_h(&self) -> f64;
+    /// W at q = r/h (0 from the support on).
+    fn w_at<L: Lane>(&self, q: L) -> L;
+    /// dW/dr at q = r/h (<= 0 inside the support for the usual kernels).
+    fn dw_dr_at<L: Lane>(&self, q: L) -> L;
+    /// (dW/dr)/r at q = r/h, in closed form (no division for most kernels), so that
+    /// grad_i W_ij = x_ij (dW/dr)/r; 0 at r = 0 (where grad W = 0 by symmetry) and
+    /// beyond the support.
+    fn grad_factor_at<L: Lane>(&self, q: L, r: L) -> L;
+
     /// W(r).
-    fn w(&self, r: f64) -> f64;
-    /// dW/dr (<= 0 inside the support for the usual kernels).
-    fn dw_dr(&self, r: f64) -> f64;
-    /// (dW/dr) / r for r > 0, in closed form (no division for most kernels), so that
-    /// grad_i W_ij = x_ij (dW/dr)/r.
-    fn grad_factor(&self, r: f64) -> f64;
-    /// grad_i W_ij for x_ij = x_i - x_j at distance r > 0: (dW/dr) x_ij / r.
+    #[inline(always)]
+    fn w(&self, r: f64) -> f64 {
+        self.w_at(r * self.inv_h())
+    }
+    /// dW/dr at r.
+    #[inline(always)]
+    fn dw_dr(&self, r: f64) -> f64 {
+        self.dw_dr_at(r * self.inv_h())
+    }
+    /// (dW/dr)/r at r (0 at r = 0).
+    #[inline(always)]
+    fn grad_factor(&self, r: f64) -> f64 {
+        self.grad_factor_at(r * self.inv_h(), r)
+    }
+    /// grad_i W_ij for x_ij = x_i - x_j at distance r: (dW/dr) x_ij / r (0 at r = 0).
     #[inline(always)]
     fn grad(&self, x_ij: glam::DVec2, r: f64) -> glam::DVec2 {
-        if r > 0.0 {
-            x_ij * self.grad_factor(r)
-        } else {
-            glam::DVec2::ZERO
-        }
+        x_ij * self.grad_factor(r)
     }
 }
 
@@ -62,27 +81,34 @@ impl KernelKind {
     ];
 }
 
+/// A kernel type for one smoothing length: its normalisation and its shape functions
+/// of q = r/h, each an expression over the lane type with constants written `c(x)`:
+/// `w` the shape of W, `dw` of dW/dq, `dw_over_q` of (dW/dq)/q.
 macro_rules! kernel_type {
-    ($name:ident, $norm:expr, $support:expr, |$q:ident| w = $w:expr, dw = $dw:expr, dw_over_q = $f:expr) => {
+    ($name:ident, $norm:expr, $support:expr,
+     |$q:ident, $c:ident| w = $w:expr, dw = $dw:expr, dw_over_q = $f:expr) => {
         #[doc = concat!("The ", stringify!($name), " kernel for one smoothing length.")]
         #[derive(Clone, Copy, Debug)]
         pub struct $name {
             inv_h: f64,
-            /// Normalisation divided by h^2.
+            /// Normalisation divided by h^2 (W = norm w(q)).
             norm: f64,
+            /// norm / h, for dW/dr = norm/h dw/dq.
+            norm_dw: f64,
+            /// norm / h^2, for (dW/dr)/r = norm/h^2 (dw/dq)/q, since r = q h.
+            norm_grad: f64,
             support: f64,
         }
         impl $name {
             pub fn new(h: f64) -> Self {
+                let (inv_h, norm) = (1.0 / h, $norm / (h * h));
                 Self {
-                    inv_h: 1.0 / h,
-                    norm: $norm / (h * h),
+                    inv_h,
+                    norm,
+                    norm_dw: norm * inv_h,
+                    norm_grad: norm * inv_h * inv_h,
                     support: $support * h,
                 }
-            }
-            /// 1 / h.
-            pub fn inv_h(&self) -> f64 {
-                self.inv_h
             }
             /// The normalisation divided by h^2 (W = norm w(q)).
             pub fn norm(&self) -> f64 {
@@ -95,32 +121,24 @@ macro_rules! kernel_type {
                 self.support
             }
             #[inline(always)]
-            fn w(&self, r: f64) -> f64 {
-                let $q = r * self.inv_h;
-                if $q >= $support {
-                    0.0
-                } else {
-                    self.norm * $w
-                }
+            fn inv_h(&self) -> f64 {
+                self.inv_h
             }
             #[inline(always)]
-            fn dw_dr(&self, r: f64) -> f64 {
-                let $q = r * self.inv_h;
-                if $q >= $support {
-                    0.0
-                } else {
-                    self.norm * self.inv_h * $dw
-                }
+            fn w_at<L: Lane>(&self, $q: L) -> L {
+                let $c = L::splat;
+                ($c(self.norm) * $w).keep($q.lt($c($support)))
             }
             #[inline(always)]
-            fn grad_factor(&self, r: f64) -> f64 {
-                // (dW/dr)/r = norm/h^2 (dw/dq)/q, since r = q h.
-                let $q = r * self.inv_h;
-                if $q >= $support {
-                    0.0
-                } else {
-                    self.norm * self.inv_h * self.inv_h * $f
-                }
+            fn dw_dr_at<L: Lane>(&self, $q: L) -> L {
+                let $c = L::splat;
+                ($c(self.norm_dw) * $dw).keep($q.lt($c($support)))
+            }
+            #[inline(always)]
+            fn grad_factor_at<L: Lane>(&self, $q: L, r: L) -> L {
+                let $c = L::splat;
+                let inside = L::and($q.lt($c($support)), L::zero().lt(r));
+                ($c(self.norm_grad) * $f).keep(inside)
             }
         }
     };
@@ -130,53 +148,65 @@ kernel_type!(
     Gaussian,
     1.0 / PI,
     3.0,
-    |q| w = (-q * q).exp(),
-    dw = -2.0 * q * (-q * q).exp(),
-    dw_over_q = -2.0 * (-q * q).exp()
+    |q, c| w = (-q * q).exp(),
+    dw = c(-2.0) * q * (-q * q).exp(),
+    dw_over_q = c(-2.0) * (-q * q).exp()
 );
 kernel_type!(
     Quadratic,
     2.0 / PI,
     2.0,
-    |q| w = 0.1875 * q * q - 0.75 * q + 0.75,
-    dw = 0.375 * q - 0.75,
-    dw_over_q = 0.375 - 0.75 / q
+    |q, c| w = c(0.1875) * q * q - c(0.75) * q + c(0.75),
+    dw = c(0.375) * q - c(0.75),
+    dw_over_q = c(0.375) - c(0.75) / q
 );
 kernel_type!(
     Cubic,
     15.0 / (7.0 * PI),
     2.0,
-    |q| w = if q < 1.0 {
-        2.0 / 3.0 - q * q + 0.5 * q * q * q
-    } else {
-        (2.0 - q).powi(3) / 6.0
+    |q, c| w = {
+        let t = c(2.0) - q;
+        L::select(
+            q.lt(c(1.0)),
+            c(2.0 / 3.0) - q * q + c(0.5) * q * q * q,
+            t * t * t / c(6.0),
+        )
     },
-    dw = if q < 1.0 {
-        -2.0 * q + 1.5 * q * q
-    } else {
-        -0.5 * (2.0 - q).powi(2)
+    dw = {
+        let t = c(2.0) - q;
+        L::select(
+            q.lt(c(1.0)),
+            c(-2.0) * q + c(1.5) * q * q,
+            c(-0.5) * (t * t),
+        )
     },
-    dw_over_q = if q < 1.0 {
-        -2.0 + 1.5 * q
-    } else {
-        -0.5 * (2.0 - q).powi(2) / q
+    dw_over_q = {
+        let t = c(2.0) - q;
+        L::select(q.lt(c(1.0)), c(-2.0) + c(1.5) * q, c(-0.5) * (t * t) / q)
     }
 );
 kernel_type!(
     Quartic,
     15.0 / (7.0 * PI),
     2.0,
-    |q| w = 2.0 / 3.0 - 9.0 / 8.0 * q * q + 19.0 / 24.0 * q * q * q - 5.0 / 32.0 * q.powi(4),
-    dw = -9.0 / 4.0 * q + 19.0 / 8.0 * q * q - 5.0 / 8.0 * q * q * q,
-    dw_over_q = -9.0 / 4.0 + 19.0 / 8.0 * q - 5.0 / 8.0 * q * q
+    |q, c| w = c(2.0 / 3.0) - c(9.0 / 8.0) * q * q + c(19.0 / 24.0) * q * q * q
+        - c(5.0 / 32.0) * whole_pow(q, 4),
+    dw = c(-9.0 / 4.0) * q + c(19.0 / 8.0) * q * q - c(5.0 / 8.0) * q * q * q,
+    dw_over_q = c(-9.0 / 4.0) + c(19.0 / 8.0) * q - c(5.0 / 8.0) * q * q
 );
 kernel_type!(
     Wendland,
     7.0 / (4.0 * PI),
     2.0,
-    |q| w = (1.0 - 0.5 * q).powi(4) * (2.0 * q + 1.0),
-    dw = -5.0 * q * (1.0 - 0.5 * q).powi(3),
-    dw_over_q = -5.0 * (1.0 - 0.5 * q).powi(3)
+    |q, c| w = whole_pow(c(1.0) - c(0.5) * q, 4) * (c(2.0) * q + c(1.0)),
+    dw = {
+        let t = c(1.0) - c(0.5) * q;
+        c(-5.0) * q * (t * t * t)
+    },
+    dw_over_q = {
+        let t = c(1.0) - c(0.5) * q;
+        c(-5.0) * (t * t * t)
+    }
 );
 
 /// Runs `$body` with `$k` bound to the concrete kernel of `$kind` for smoothing length

@@ -10,6 +10,7 @@ pub mod linear_sloshing;
 pub mod motion;
 pub mod output;
 pub mod overrides;
+pub mod pair;
 pub mod parallel;
 pub mod piston;
 pub mod registry;

@@ -56,7 +56,11 @@ impl StageRegistry {
     {
         let ctor: Constructor = Box::new(move |de| {
             let params: P = erased_serde::deserialize(de)?;
-            let resolved = ron::to_string(&params).map_err(serde::de::Error::custom)?;
+            // As the loader reads them: a term list's `Name(field: value)` without the
+            // newtype's inner parentheses.
+            let resolved = crate::scenario::ron_options()
+                .to_string(&params)
+                .map_err(serde::de::Error::custom)?;
             let stage = build(params).map_err(serde::de::Error::custom)?;
             Ok((Box::new(stage) as Box<dyn Stage>, resolved))
         });

@@ -491,9 +491,13 @@ pub fn parse_ron<T: serde::de::DeserializeOwned>(text: &str, file: &str) -> Resu
         .map_err(|e| parse_error(&Doc::new(text), file, &e))
 }
 
-/// RON options: `IMPLICIT_SOME` lets optional fields be written without `Some(..)`.
-fn ron_options() -> ron::Options {
-    ron::Options::default().with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME)
+/// RON options: `IMPLICIT_SOME` lets optional fields be written without `Some(..)`;
+/// `UNWRAP_VARIANT_NEWTYPES` lets a variant holding a parameter struct be written
+/// `Name(field: value)` (a pair term in `Forces(terms: [...])`), not `Name((..))`.
+pub(crate) fn ron_options() -> ron::Options {
+    use ron::extensions::Extensions;
+    ron::Options::default()
+        .with_default_extension(Extensions::IMPLICIT_SOME | Extensions::UNWRAP_VARIANT_NEWTYPES)
 }
 
 impl Scenario {

@@ -78,35 +78,7 @@ impl Tait {
     }
 }
 
-/// x^n by multiplication (n small): the usual exponents (4 for the artificial
-/// pressure, 6 and 7 for Tait with gamma = 7) written out, others by repeated squaring.
-#[inline(always)]
-pub fn whole_pow(x: f64, n: u32) -> f64 {
-    match n {
-        4 => {
-            let x2 = x * x;
-            return x2 * x2;
-        }
-        6 => {
-            let x3 = x * x * x;
-            return x3 * x3;
-        }
-        7 => {
-            let x3 = x * x * x;
-            return x3 * x3 * x;
-        }
-        _ => {}
-    }
-    let (mut base, mut e, mut out) = (x, n, 1.0);
-    while e > 0 {
-        if e & 1 == 1 {
-            out *= base;
-        }
-        base *= base;
-        e >>= 1;
-    }
-    out
-}
+pub use crate::pair::lane::whole_pow;
 
 #[cfg(test)]
 mod tests {
@@ -116,7 +88,7 @@ mod tests {
     fn whole_powers_match_powf() {
         for n in 0..=12 {
             for x in [0.3, 0.97, 1.0, 1.013, 2.5] {
-                let (a, b) = (whole_pow(x, n), f64::powf(x, n as f64));
+                let (a, b) = (whole_pow::<f64>(x, n), f64::powf(x, n as f64));
                 assert!(
                     (a - b).abs() <= 8.0 * f64::EPSILON * b,
                     "{x}^{n}: {a} vs {b}"

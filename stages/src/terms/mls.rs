@@ -1,5 +1,5 @@
 //! Colagrossi & Landrini's (2003) first-order moving-least-squares density filter
-//! (physics.md, "Density re-initialisation", the more accurate alternative to Shepard):
+//! (docs/physics.md, "Density re-initialisation", the more accurate alternative to Shepard):
 //!
 //!   rho_i = sum_j m_j W^MLS_ij,   W^MLS_ij = (b_0 + b_1 (x_i - x_j) + b_2 (y_i - y_j)) W_ij,
 //!   (b_0, b_1, b_2) = A^-1 (1, 0, 0),   A = sum_j W_ij V_j [1 d^T; d d d^T],  d = x_i - x_j,
@@ -12,6 +12,7 @@
 //! Shepard value is used instead.
 
 use glam::DVec2;
+use sph_core::pair::{Field, Fields, Lane, Me, Pair, PairTerm};
 
 /// Smallest accepted det(A) / (A_00 A_11 A_22): below it A is near singular.
 const MIN_CONDITION: f64 = 1e-3;
@@ -63,6 +64,59 @@ impl MlsSums {
         let b = DVec2::new(c01, c02) / det;
         // sum_j m_j (b0 + b . d) W = b0 sum m W + b . sum m W d
         c00 / det * self.m0 + b.dot(self.m1)
+    }
+}
+
+/// The MLS-filtered density as a pair term, with W(0) for i's own contribution.
+pub struct Mls {
+    pub w0: f64,
+}
+
+impl PairTerm for Mls {
+    /// The sums of [`MlsSums`] in lanes: A's upper triangle, sum m W, sum m W d.
+    type Acc<L: Lane> = [L; 9];
+    type Out = f64;
+    fn reads(&self) -> Fields {
+        Fields::of(&[Field::Rho])
+    }
+    fn zero<L: Lane>(&self) -> [L; 9] {
+        [L::zero(); 9]
+    }
+    #[inline(always)]
+    fn pair<L: Lane>(&self, _: &Me, p: &Pair<L>, s: &mut [L; 9]) {
+        let (m, w, dx, dy) = (p.j(Field::Mass), p.w, p.dx, p.dy);
+        let vw = m / p.j(Field::Rho) * w;
+        let mw = m * w;
+        let terms = [
+            vw,
+            vw * dx,
+            vw * dy,
+            vw * dx * dx,
+            vw * dx * dy,
+            vw * dy * dy,
+            mw,
+            mw * dx,
+            mw * dy,
+        ];
+        for (s, t) in s.iter_mut().zip(terms) {
+            *s = *s + t;
+        }
+    }
+    #[inline(always)]
+    fn finish<L: Lane>(&self, me: &Me, s: [L; 9]) -> f64 {
+        let s = s.map(L::sum);
+        let mut sums = MlsSums {
+            a: [s[0], s[1], s[2], s[3], s[4], s[5]],
+            m0: s[6],
+            m1: DVec2::new(s[7], s[8]),
+        };
+        sums.add(
+            DVec2::ZERO,
+            self.w0,
+            me.get(Field::Mass),
+            me.get(Field::Rho),
+        );
+        sums.mls()
     }
 }
 

@@ -1,0 +1,320 @@
+//! The pair-interaction layer: every sum over a particle's neighbours (the momentum
+//! and continuity equations, the density filters, ...) is a [`PairTerm`] written once
+//! over a [`Lane`] type and run by a [`Pass`]:
+//!
+//! - on `f64`, one neighbour at a time (the scalar path: other processors, or
+//!   `SPH_NO_SIMD=1`);
+//! - on eight lanes with AVX-512 or AVX2 (the SIMD path, chosen at run time), which
+//!   reads neighbour j's fields from its packed record with gathers.
+//!
+//! The two paths evaluate the same source, operation for operation; they differ only
+//! in the order a particle's pairs are added (docs/architecture.md, "Determinism").
+//!
+//! A pass works on [`Records`]: the particles (fluid, then ghosts: the joint numbering
+//! of the neighbour lists) packed with the [`Field`]s its terms read, one record per
+//! particle, so a neighbour's fields come from one cache line.
+
+pub mod lane;
+pub mod rates;
+mod record;
+#[cfg(target_arch = "x86_64")]
+mod x86;
+
+pub use lane::{whole_pow, Lane};
+pub use rates::{EquationsOfMotion, RateSums, RateTerm, Rates};
+pub use record::{Field, Fields, Records};
+
+use crate::kernel::Kernel;
+
+/// The instruction set a pass sums with. A value other than `Scalar` can only be made
+/// on a processor that has it, so the SIMD code it selects is sound to run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Isa(IsaKind);
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum IsaKind {
+    Scalar,
+    #[cfg(target_arch = "x86_64")]
+    Avx512,
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
+}
+
+impl Isa {
+    /// One neighbour at a time, on any processor.
+    pub const SCALAR: Isa = Isa(IsaKind::Scalar);
+
+    /// The widest this processor supports: AVX-512 (F and VL), else AVX2, else scalar;
+    /// scalar with `SPH_NO_SIMD` set, AVX2 at most with `SPH_SIMD=avx2` (to measure
+    /// that path). Worked out once per process.
+    pub fn detect() -> Isa {
+        static ISA: std::sync::OnceLock<Isa> = std::sync::OnceLock::new();
+        *ISA.get_or_init(|| {
+            let avx2_only = std::env::var_os("SPH_SIMD").is_some_and(|v| v == "avx2");
+            let all = Isa::available();
+            all.into_iter()
+                .find(|isa| !(avx2_only && isa.name() == "avx512"))
+                .filter(|_| simd_allowed())
+                .unwrap_or(Isa::SCALAR)
+        })
+    }
+
+    /// Every SIMD instruction set this processor can run, widest first (for tests
+    /// comparing them); empty off x86-64.
+    pub fn available() -> Vec<Isa> {
+        #[allow(unused_mut)]
+        let mut all = Vec::new();
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::is_x86_feature_detected as has;
+            if has!("avx512f") && has!("avx512vl") {
+                all.push(Isa(IsaKind::Avx512));
+            }
+            if has!("avx2") {
+                all.push(Isa(IsaKind::Avx2));
+            }
+        }
+        all
+    }
+
+    /// `scalar`, `avx512` or `avx2`.
+    pub fn name(self) -> &'static str {
+        match self.0 {
+            IsaKind::Scalar => "scalar",
+            #[cfg(target_arch = "x86_64")]
+            IsaKind::Avx512 => "avx512",
+            #[cfg(target_arch = "x86_64")]
+            IsaKind::Avx2 => "avx2",
+        }
+    }
+}
+
+/// False when the environment variable `SPH_NO_SIMD` is set (to any value): every
+/// SIMD path (pair sums, neighbour scan) then runs its scalar code.
+pub fn simd_allowed() -> bool {
+    static ALLOWED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *ALLOWED.get_or_init(|| std::env::var_os("SPH_NO_SIMD").is_none())
+}
+
+/// Particle i's packed fields, as a term reads them: `me.get(Field::Rho)` is rho_i,
+/// the same in every lane.
+#[derive(Clone, Copy, Debug)]
+pub struct Me {
+    values: [f64; Field::COUNT],
+    /// i's index in the joint numbering.
+    pub index: usize,
+}
+
+impl Me {
+    /// Field `f` of particle i (0 if the records do not hold it).
+    #[inline(always)]
+    pub fn get(&self, f: Field) -> f64 {
+        self.values[f as usize]
+    }
+    /// The same, in every lane.
+    #[inline(always)]
+    pub fn lanes<L: Lane>(&self, f: Field) -> L {
+        L::splat(self.get(f))
+    }
+}
+
+/// A group of neighbours j of particle i (one, or up to eight in lanes) with the
+/// geometry every term shares: x_ij = x_i - x_j, r_ij, q = r/h, W_ij and
+/// grad_i W_ij. The lanes of a group beyond its neighbours hold a padding particle
+/// of zero mass beyond the support (W = grad W = 0), so they add nothing to a term
+/// that is weighted by m_j, W or grad W.
+pub struct Pair<'a, L: Lane> {
+    pub dx: L,
+    pub dy: L,
+    pub r: L,
+    pub q: L,
+    /// W(r_ij).
+    pub w: L,
+    /// grad_i W_ij = x_ij (dW/dr)/r.
+    pub gx: L,
+    pub gy: L,
+    index: L::Index,
+    records: &'a Records,
+    pad: &'a [f64; Field::COUNT],
+}
+
+impl<L: Lane> Pair<'_, L> {
+    /// Field `f` of the neighbours (the padding value in unused lanes).
+    #[inline(always)]
+    pub fn j(&self, f: Field) -> L {
+        let offset = self.records.offset(f);
+        // SAFETY: `index` came from `Gather::index` with this buffer's length and
+        // stride (in `Pass::drive`), `offset < stride` (`Records::offset`), and L's
+        // instructions exist here (a value of L exists).
+        unsafe {
+            L::gather(
+                self.index,
+                self.records.base(),
+                offset,
+                self.pad[f as usize],
+            )
+        }
+    }
+}
+
+/// A sum over a particle's neighbours, written once over the lane type.
+///
+/// `zero`, `pair` and `finish` are called for one particle i: `pair` for each group
+/// of neighbours, in list order (the group's lanes are neighbours l, l + WIDTH, ...
+/// of the list in the SIMD path), `finish` once with the lanes of the accumulator.
+/// Implementations are monomorphised per lane type and kernel: no dynamic dispatch
+/// per pair.
+pub trait PairTerm: Sync {
+    /// The per-particle accumulator in lanes.
+    type Acc<L: Lane>: Copy;
+    /// The per-particle result.
+    type Out: Send;
+    /// The fields of i and j the term reads (x, y and mass are always packed).
+    fn reads(&self) -> Fields;
+    /// The accumulator before the first neighbour.
+    fn zero<L: Lane>(&self) -> Self::Acc<L>;
+    /// Adds one group of neighbours.
+    fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, acc: &mut Self::Acc<L>);
+    /// The result from the accumulated lanes (add them with [`Lane::sum`]) and i's own
+    /// fields (for a self contribution).
+    fn finish<L: Lane>(&self, me: &Me, acc: Self::Acc<L>) -> Self::Out;
+}
+
+/// A term summed over neighbours with one kernel, on records packed for it, with an
+/// instruction set. Sound for any input: the records must hold what the term reads
+/// ([`Pass::new`] checks), and every neighbour index is checked against the records
+/// before it is gathered (a wrong index panics).
+pub struct Pass<'a, T: PairTerm, K: Kernel> {
+    term: &'a T,
+    kernel: K,
+    records: &'a Records,
+    isa: Isa,
+    /// How far beyond i the padding particle sits: four supports.
+    pad_shift: f64,
+}
+
+/// The records do not hold a field that a term reads.
+#[derive(Debug, thiserror::Error)]
+#[error("the packed particles lack the field {missing:?} that a pair term reads")]
+pub struct MissingField {
+    pub missing: Field,
+}
+
+impl<'a, T: PairTerm, K: Kernel> Pass<'a, T, K> {
+    /// A pass of `term` with `kernel` over `records`, with the processor's widest
+    /// instruction set ([`Isa::detect`]).
+    pub fn new(term: &'a T, kernel: K, records: &'a Records) -> Result<Self, MissingField> {
+        Self::with_isa(term, kernel, records, Isa::detect())
+    }
+
+    /// The same with a given instruction set (tests compare them).
+    pub fn with_isa(
+        term: &'a T,
+        kernel: K,
+        records: &'a Records,
+        isa: Isa,
+    ) -> Result<Self, MissingField> {
+        if let Some(missing) = records.lacks(term.reads()) {
+            return Err(MissingField { missing });
+        }
+        Ok(Self {
+            term,
+            kernel,
+            records,
+            isa,
+            pad_shift: 4.0 * kernel.support(),
+        })
+    }
+
+    /// The term's sum for particle `i` (joint numbering) over `neighbours` (joint
+    /// indices, i excluded).
+    ///
+    /// # Panics
+    /// If `i` or a neighbour index is beyond the records.
+    #[inline]
+    pub fn sum(&self, i: usize, neighbours: &[u32]) -> T::Out {
+        match self.isa.0 {
+            // SAFETY: f64 needs no instructions beyond the baseline.
+            IsaKind::Scalar => unsafe { self.drive::<f64>(i, neighbours) },
+            // SAFETY: an `Isa` of this kind exists only where the processor has it.
+            #[cfg(target_arch = "x86_64")]
+            IsaKind::Avx512 => unsafe { x86::sum_avx512(self, i, neighbours) },
+            // SAFETY: as above.
+            #[cfg(target_arch = "x86_64")]
+            IsaKind::Avx2 => unsafe { x86::sum_avx2(self, i, neighbours) },
+        }
+    }
+
+    /// The neighbour loop on lane type `L`: the shared geometry of each group of
+    /// neighbours, then the term.
+    ///
+    /// # Safety
+    /// L's instructions exist on this processor.
+    #[inline(always)]
+    unsafe fn drive<L: Lane>(&self, i: usize, neighbours: &[u32]) -> T::Out {
+        let (rec, k) = (self.records, &self.kernel);
+        let me = rec.particle(i);
+        let mut pad = me.values;
+        pad[Field::X as usize] += self.pad_shift;
+        for f in [Field::Mass, Field::PRho2, Field::Sound] {
+            pad[f as usize] = 0.0;
+        }
+        let (base, stride, len) = (rec.base(), rec.stride(), rec.len());
+        let (ox, oy) = (rec.offset(Field::X), rec.offset(Field::Y));
+        let (xi, yi) = (L::splat(me.get(Field::X)), L::splat(me.get(Field::Y)));
+        let inv_h = L::splat(k.inv_h());
+        let mut acc = self.term.zero::<L>();
+        for js in neighbours.chunks(L::WIDTH) {
+            // SAFETY: L's instructions exist (caller); `index` checks every index
+            // against `len`, and the gathers read records of this buffer.
+            let (index, xj, yj) = unsafe {
+                let index = L::index(js, stride, len);
+                (
+                    index,
+                    L::gather(index, base, ox, pad[Field::X as usize]),
+                    L::gather(index, base, oy, pad[Field::Y as usize]),
+                )
+            };
+            let (dx, dy) = (xi - xj, yi - yj);
+            let r = (dx * dx + dy * dy).sqrt();
+            let q = r * inv_h;
+            let f = k.grad_factor_at(q, r);
+            let p = Pair {
+                dx,
+                dy,
+                r,
+                q,
+                w: k.w_at(q),
+                gx: dx * f,
+                gy: dy * f,
+                index,
+                records: rec,
+                pad: &pad,
+            };
+            self.term.pair(&me, &p, &mut acc);
+        }
+        self.term.finish(&me, acc)
+    }
+}
+
+/// Runs `f` with the sim's shared [`Records`] buffer (a resource, created on first
+/// use) packed with `fields` from the current state; None when the world has no fluid.
+pub fn with_records<R>(
+    sim: &mut crate::Sim,
+    fields: Fields,
+    f: impl FnOnce(&crate::Sim, &crate::world::Particles, &Records) -> Result<R, crate::StepError>,
+) -> Result<Option<R>, crate::StepError> {
+    let mut records = sim.resources.take::<Records>().unwrap_or_default();
+    let result = match crate::world::Particles::of(&sim.world) {
+        Some(particles) => records
+            .pack(&particles, fields, &sim.constants.eos)
+            .and_then(|()| f(sim, &particles, &records))
+            .map(Some),
+        None => Ok(None),
+    };
+    sim.resources.insert(records);
+    result
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,91 @@
+//! Terms of the equations of motion: each adds its share of one pair's contribution to
+//! dv_i/dt, d rho_i/dt and the dissipation rate, and the terms a scenario names run in
+//! one neighbour loop ([`EquationsOfMotion`]).
+
+use super::{Field, Fields, Lane, Me, Pair, PairTerm};
+use glam::DVec2;
+
+/// One particle's rates in lanes, summed over its neighbours.
+#[derive(Clone, Copy)]
+pub struct Rates<L> {
+    /// This pair's coefficient C_ij of -m_j grad_i W_ij in dv_i/dt (reset for each
+    /// pair): the pressure gradient, the artificial viscosity and the artificial
+    /// pressure are all of the form dv_i/dt = - sum_j m_j C_ij grad_i W_ij, so they
+    /// add to C_ij and are multiplied out once.
+    pub coef: L,
+    /// dv_i/dt, other than through `coef` [m/s^2].
+    pub ax: L,
+    pub ay: L,
+    /// d rho_i/dt [kg/m^3/s].
+    pub drho: L,
+    /// The viscous dissipation rate of particle i's pairs, P_i, such that the flow
+    /// loses (1/2) sum_i m_i P_i [W per metre of depth].
+    pub power: L,
+}
+
+/// A term of the equations of motion, written over the lane type.
+pub trait RateTerm: Sync {
+    /// The fields of i and j the term reads.
+    fn reads(&self) -> Fields;
+    /// Whether the term adds to [`Rates::coef`].
+    fn uses_coef(&self) -> bool {
+        false
+    }
+    /// Adds this term's contribution of one group of neighbours.
+    fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>);
+}
+
+/// One particle's rates, summed.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RateSums {
+    /// dv_i/dt from the pair terms (gravity not included) [m/s^2].
+    pub acc: DVec2,
+    /// d rho_i/dt [kg/m^3/s].
+    pub drho: f64,
+    /// P_i: see [`Rates::power`].
+    pub power: f64,
+}
+
+/// The pair term that sums a set of rate terms in one neighbour loop.
+pub struct EquationsOfMotion<'a, R: RateTerm>(pub &'a R);
+
+impl<R: RateTerm> PairTerm for EquationsOfMotion<'_, R> {
+    type Acc<L: Lane> = Rates<L>;
+    type Out = RateSums;
+
+    fn reads(&self) -> Fields {
+        self.0.reads()
+    }
+
+    #[inline(always)]
+    fn zero<L: Lane>(&self) -> Rates<L> {
+        let z = L::zero();
+        Rates {
+            coef: z,
+            ax: z,
+            ay: z,
+            drho: z,
+            power: z,
+        }
+    }
+
+    #[inline(always)]
+    fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
+        r.coef = L::zero();
+        self.0.pair(me, p, r);
+        if self.0.uses_coef() {
+            let mt = p.j(Field::Mass) * r.coef;
+            r.ax = r.ax - mt * p.gx;
+            r.ay = r.ay - mt * p.gy;
+        }
+    }
+
+    #[inline(always)]
+    fn finish<L: Lane>(&self, _: &Me, r: Rates<L>) -> RateSums {
+        RateSums {
+            acc: DVec2::new(r.ax.sum(), r.ay.sum()),
+            drho: r.drho.sum(),
+            power: r.power.sum(),
+        }
+    }
+}

@@ -1,0 +1,282 @@
+//! Particles packed for the pair sums (docs/performance.md): what a neighbour sum reads
+//! of particle j, in one record in the joint fluid + ghost numbering, instead of
+//! several separate columns each reached through the fluid/ghost branch of
+//! `Joined::get`. A record holds exactly the fields a pass's terms read (the union of
+//! their [`Fields`]), at 4, 8 or 16 f64s, so the shipped momentum pass reads one
+//! 64-byte cache line per neighbour and the Shepard filter half of one.
+//!
+//! One buffer serves every pair stage (a resource of the sim); each stage packs it
+//! again at the start of its run, because the state changes between stages (the
+//! filter changes densities, `Eos` pressures).
+
+use crate::components::{Density, Mass, Position, Pressure, Velocity};
+use crate::sim::Tait;
+use crate::stage::StepError;
+use crate::world::Particles;
+use rayon::prelude::*;
+
+/// A particle quantity a pair term can read from the packed records.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Field {
+    /// Position x [m].
+    X,
+    /// Position y [m].
+    Y,
+    /// Velocity, x [m/s].
+    Vx,
+    /// Velocity, y [m/s].
+    Vy,
+    /// Density rho [kg/m^3].
+    Rho,
+    /// Mass m [kg].
+    Mass,
+    /// p / rho^2 [Pa m^6/kg^2].
+    PRho2,
+    /// Sound speed c(rho) of the equation of state [m/s].
+    Sound,
+}
+
+impl Field {
+    /// How many fields there are.
+    pub const COUNT: usize = 8;
+    /// Every field, in record order.
+    pub const ALL: [Field; Field::COUNT] = [
+        Field::X,
+        Field::Y,
+        Field::Vx,
+        Field::Vy,
+        Field::Rho,
+        Field::Mass,
+        Field::PRho2,
+        Field::Sound,
+    ];
+}
+
+/// A set of [`Field`]s.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Fields(u16);
+
+impl Fields {
+    /// What every pass packs: the geometry and the mass (the padding lanes of a group
+    /// are a particle of zero mass).
+    pub const GEOMETRY: Fields = Fields::of(&[Field::X, Field::Y, Field::Mass]);
+
+    /// The set of `list`.
+    pub const fn of(list: &[Field]) -> Fields {
+        let mut bits = 0u16;
+        let mut k = 0;
+        while k < list.len() {
+            bits |= 1 << list[k] as u16;
+            k += 1;
+        }
+        Fields(bits)
+    }
+    /// Both sets.
+    pub const fn with(self, other: Fields) -> Fields {
+        Fields(self.0 | other.0)
+    }
+    pub const fn contains(self, f: Field) -> bool {
+        self.0 & (1 << f as u16) != 0
+    }
+    /// How many fields.
+    pub const fn len(self) -> usize {
+        self.0.count_ones() as usize
+    }
+    pub const fn is_empty(self) -> bool {
+        self.0 == 0
+    }
+}
+
+/// One cache line of records.
+#[derive(Clone, Copy, Default)]
+#[repr(C, align(64))]
+struct Line([f64; 8]);
+
+/// The packed particles: `len` records of `stride` f64s (4, 8 or 16), the fields in
+/// [`Field`] order.
+#[derive(Default)]
+pub struct Records {
+    lines: Vec<Line>,
+    len: usize,
+    stride: usize,
+    fields: Fields,
+    /// Offset of each field in a record (valid for the fields held).
+    offsets: [usize; Field::COUNT],
+}
+
+impl Records {
+    /// Records in the joint numbering.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+    /// f64s per record.
+    pub fn stride(&self) -> usize {
+        self.stride
+    }
+    /// The fields held.
+    pub fn fields(&self) -> Fields {
+        self.fields
+    }
+    /// Bytes held (capacity), for memory accounting.
+    pub fn heap_bytes(&self) -> usize {
+        self.lines.capacity() * std::mem::size_of::<Line>()
+    }
+
+    /// The first field of `wanted` that the records lack.
+    pub(crate) fn lacks(&self, wanted: Fields) -> Option<Field> {
+        Field::ALL
+            .into_iter()
+            .find(|&f| wanted.contains(f) && !self.fields.contains(f))
+    }
+
+    /// Offset of field `f` in a record: below the stride (0 for a field not held,
+    /// which [`super::Pass::new`] refuses to read).
+    #[inline(always)]
+    pub(crate) fn offset(&self, f: Field) -> usize {
+        self.offsets[f as usize]
+    }
+
+    #[inline(always)]
+    pub(crate) fn base(&self) -> *const f64 {
+        self.lines.as_ptr() as *const f64
+    }
+
+    /// Field `f` of record `j` (0 for a field not held).
+    ///
+    /// # Panics
+    /// If `j` is beyond the records.
+    pub fn get(&self, j: usize, f: Field) -> f64 {
+        assert!(j < self.len, "record {j} of {}", self.len);
+        if !self.fields.contains(f) {
+            return 0.0;
+        }
+        bytemuck_lines_ref(&self.lines)[j * self.stride + self.offset(f)]
+    }
+
+    /// Particle `i`'s fields for a term.
+    ///
+    /// # Panics
+    /// If `i` is beyond the records.
+    #[inline]
+    pub(crate) fn particle(&self, i: usize) -> super::Me {
+        assert!(i < self.len, "particle {i} of {} records", self.len);
+        let record = &bytemuck_lines_ref(&self.lines)[i * self.stride..][..self.stride];
+        let mut values = [0.0; Field::COUNT];
+        for f in Field::ALL {
+            if self.fields.contains(f) {
+                values[f as usize] = record[self.offset(f)];
+            }
+        }
+        super::Me { values, index: i }
+    }
+
+    /// Sets the layout for `fields` (and the geometry) and `len` records; the
+    /// contents are left to be filled.
+    fn shape(&mut self, fields: Fields, len: usize) {
+        let fields = fields.with(Fields::GEOMETRY);
+        let mut at = 0;
+        for f in Field::ALL {
+            self.offsets[f as usize] = if fields.contains(f) {
+                at += 1;
+                at - 1
+            } else {
+                0
+            };
+        }
+        self.stride = fields.len().next_power_of_two().max(4);
+        self.fields = fields;
+        self.len = len;
+        let lines = (len * self.stride).div_ceil(8);
+        // The buffer keeps its capacity from step to step; grow by an eighth more than
+        // needed, not by doubling (these buffers are large).
+        if lines > self.lines.capacity() {
+            self.lines
+                .reserve_exact(lines + lines / 8 - self.lines.len());
+        }
+        self.lines.resize(lines, Line::default());
+    }
+
+    /// Packs `fields` of every particle (fluid, then ghosts) from the world's columns;
+    /// `eos` gives the sound speed.
+    ///
+    /// # Errors
+    /// A column the fields need is missing, or the particles are too many to index
+    /// the records with 32-bit offsets.
+    pub fn pack(
+        &mut self,
+        particles: &Particles,
+        fields: Fields,
+        eos: &Tait,
+    ) -> Result<(), StepError> {
+        let (x, rho, m) = (
+            particles.joined::<Position>()?,
+            particles.joined::<Density>()?,
+            particles.joined::<Mass>()?,
+        );
+        let (x, rho, m) = (x.view(), rho.view(), m.view());
+        let wants = |f: &[Field]| f.iter().any(|&f| fields.contains(f));
+        let v = match wants(&[Field::Vx, Field::Vy]) {
+            true => Some(particles.joined::<Velocity>()?),
+            false => None,
+        };
+        let p = match wants(&[Field::PRho2]) {
+            true => Some(particles.joined::<Pressure>()?),
+            false => None,
+        };
+        let (v, p) = (v.as_ref().map(|c| c.view()), p.as_ref().map(|c| c.view()));
+        let len = x.len();
+        if len.saturating_mul(16) >= i32::MAX as usize {
+            return Err(StepError::Internal(format!(
+                "{len} particles are too many for the packed records' 32-bit offsets"
+            )));
+        }
+        self.shape(fields, len);
+        let (stride, offsets, held) = (self.stride, self.offsets, self.fields);
+        let values: &mut [f64] = bytemuck_lines(&mut self.lines);
+        values[..len * stride]
+            .par_chunks_mut(stride)
+            .enumerate()
+            .for_each(|(j, out)| {
+                let j = j as u32;
+                let mut put = |f: Field, value: f64| {
+                    if held.contains(f) {
+                        out[offsets[f as usize]] = value;
+                    }
+                };
+                let (xj, rhoj) = (x.get(j).0, rho.get(j).0);
+                put(Field::X, xj.x);
+                put(Field::Y, xj.y);
+                put(Field::Rho, rhoj);
+                put(Field::Mass, m.get(j).0);
+                if let Some(v) = &v {
+                    let vj = v.get(j).0;
+                    put(Field::Vx, vj.x);
+                    put(Field::Vy, vj.y);
+                }
+                if let Some(p) = &p {
+                    put(Field::PRho2, p.get(j).0 / (rhoj * rhoj));
+                }
+                if held.contains(Field::Sound) {
+                    put(Field::Sound, eos.sound_speed(rhoj));
+                }
+            });
+        Ok(())
+    }
+}
+
+/// The lines as one slice of f64s.
+fn bytemuck_lines_ref(lines: &[Line]) -> &[f64] {
+    // SAFETY: as in `bytemuck_lines`.
+    unsafe { std::slice::from_raw_parts(lines.as_ptr() as *const f64, lines.len() * 8) }
+}
+
+/// The lines as one mutable slice of f64s.
+fn bytemuck_lines(lines: &mut [Line]) -> &mut [f64] {
+    // SAFETY: `Line` is `repr(C)` around `[f64; 8]` with no padding (64 bytes, align
+    // 64), so `lines.len()` lines are exactly `8 lines.len()` consecutive f64s.
+    unsafe { std::slice::from_raw_parts_mut(lines.as_mut_ptr() as *mut f64, lines.len() * 8) }
+}

@@ -1,0 +1,316 @@
+//! The eight-lane types of the SIMD path: AVX-512 (one 512-bit vector) and AVX2 (two
+//! 256-bit halves), and the pass's entry points compiled with their instructions.
+//!
+//! A value of either type exists only inside [`sum_avx512`] or [`sum_avx2`], which
+//! [`super::Isa`] lets the pass call only on a processor with those instructions (the
+//! types are private to this module and `Isa`'s constructors check the processor);
+//! that is what makes their safe arithmetic sound.
+
+use super::lane::{sealed::Gather, Lane};
+use super::{Kernel, PairTerm, Pass};
+use std::arch::x86_64::*;
+use std::ops::{Add, Div, Mul, Neg, Sub};
+
+/// The pass's sum for particle `i` with AVX-512 lanes.
+///
+/// # Safety
+/// The processor has AVX-512F and AVX-512VL.
+#[target_feature(enable = "avx512f,avx512vl")]
+pub(super) unsafe fn sum_avx512<T: PairTerm, K: Kernel>(
+    pass: &Pass<'_, T, K>,
+    i: usize,
+    js: &[u32],
+) -> T::Out {
+    // SAFETY: the caller's contract.
+    unsafe { pass.drive::<Avx512>(i, js) }
+}
+
+/// The pass's sum for particle `i` with AVX2 lanes.
+///
+/// # Safety
+/// The processor has AVX2.
+#[target_feature(enable = "avx2")]
+pub(super) unsafe fn sum_avx2<T: PairTerm, K: Kernel>(
+    pass: &Pass<'_, T, K>,
+    i: usize,
+    js: &[u32],
+) -> T::Out {
+    // SAFETY: the caller's contract.
+    unsafe { pass.drive::<Avx2>(i, js) }
+}
+
+/// The element-wise operators of a lane type through its `each`.
+macro_rules! operators {
+    ($ty:ty: $($trait:ident $method:ident => $op:ident),*) => {$(
+        impl $trait for $ty {
+            type Output = Self;
+            #[inline(always)]
+            fn $method(self, b: Self) -> Self {
+                // SAFETY: a value of this type exists only on a processor with its
+                // instructions (module documentation).
+                unsafe { self.each(b, |x, y| $op(x, y)) }
+            }
+        }
+    )*};
+}
+
+/// Eight lanes in one AVX-512 vector.
+#[derive(Clone, Copy)]
+pub(super) struct Avx512(__m512d);
+
+impl Avx512 {
+    #[inline(always)]
+    unsafe fn each(self, b: Self, f: impl Fn(__m512d, __m512d) -> __m512d) -> Self {
+        Self(f(self.0, b.0))
+    }
+}
+
+operators!(Avx512: Add add => _mm512_add_pd, Sub sub => _mm512_sub_pd,
+           Mul mul => _mm512_mul_pd, Div div => _mm512_div_pd);
+
+impl Neg for Avx512 {
+    type Output = Self;
+    #[inline(always)]
+    fn neg(self) -> Self {
+        // SAFETY: as for the operators. The sign bit flipped, as scalar negation does.
+        unsafe {
+            let sign = _mm512_set1_epi64(i64::MIN);
+            Self(_mm512_castsi512_pd(_mm512_xor_si512(
+                _mm512_castpd_si512(self.0),
+                sign,
+            )))
+        }
+    }
+}
+
+impl Lane for Avx512 {
+    const WIDTH: usize = 8;
+    type Mask = __mmask8;
+    // SAFETY (every method): a value of this type exists only on a processor with
+    // AVX-512F and AVX-512VL (module documentation); `splat` is only called there too.
+    #[inline(always)]
+    fn splat(x: f64) -> Self {
+        unsafe { Self(_mm512_set1_pd(x)) }
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        unsafe { Self(_mm512_sqrt_pd(self.0)) }
+    }
+    #[inline(always)]
+    fn max(self, b: Self) -> Self {
+        unsafe { Self(_mm512_max_pd(self.0, b.0)) }
+    }
+    #[inline(always)]
+    fn exp(self) -> Self {
+        unsafe { Self(_mm512_loadu_pd(to_array(self).map(f64::exp).as_ptr())) }
+    }
+    #[inline(always)]
+    fn lt(self, b: Self) -> __mmask8 {
+        unsafe { _mm512_cmp_pd_mask::<_CMP_LT_OQ>(self.0, b.0) }
+    }
+    #[inline(always)]
+    fn and(a: __mmask8, b: __mmask8) -> __mmask8 {
+        a & b
+    }
+    #[inline(always)]
+    fn keep(self, m: __mmask8) -> Self {
+        unsafe { Self(_mm512_maskz_mov_pd(m, self.0)) }
+    }
+    #[inline(always)]
+    fn select(m: __mmask8, yes: Self, no: Self) -> Self {
+        unsafe { Self(_mm512_mask_blend_pd(m, no.0, yes.0)) }
+    }
+    #[inline(always)]
+    fn sum(self) -> f64 {
+        reduce(to_array(self))
+    }
+}
+
+#[inline(always)]
+fn to_array(v: Avx512) -> [f64; 8] {
+    let mut a = [0.0; 8];
+    // SAFETY: as for the operators; the store writes the local array.
+    unsafe { _mm512_storeu_pd(a.as_mut_ptr(), v.0) };
+    a
+}
+
+/// The fixed lane order of [`Lane::sum`].
+#[inline(always)]
+fn reduce(a: [f64; 8]) -> f64 {
+    ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]))
+}
+
+impl Gather for Avx512 {
+    type Index = (__m256i, __mmask8);
+    #[inline(always)]
+    unsafe fn index(js: &[u32], stride: usize, len: usize) -> Self::Index {
+        debug_assert!((1..=8).contains(&js.len()) && stride.is_power_of_two());
+        let lanes = ((1u16 << js.len()) - 1) as u8;
+        // SAFETY: the features (caller); the masked load reads js[..js.len()] only.
+        unsafe {
+            let j = _mm256_maskz_loadu_epi32(lanes, js.as_ptr() as *const i32);
+            let beyond = _mm256_mask_cmpge_epu32_mask(lanes, j, _mm256_set1_epi32(len as i32));
+            assert!(
+                beyond == 0,
+                "a neighbour index beyond the {len} packed particles"
+            );
+            let shift = _mm_cvtsi32_si128(stride.trailing_zeros() as i32);
+            (_mm256_sll_epi32(j, shift), lanes)
+        }
+    }
+    #[inline(always)]
+    unsafe fn gather(index: Self::Index, base: *const f64, offset: usize, pad: f64) -> Self {
+        let (offsets, lanes) = index;
+        // SAFETY: the caller's contract: every used lane's record is in the buffer.
+        unsafe {
+            let src = _mm512_set1_pd(pad);
+            Self(_mm512_mask_i32gather_pd::<8>(
+                src,
+                lanes,
+                offsets,
+                base.add(offset),
+            ))
+        }
+    }
+}
+
+/// Eight lanes as two AVX2 vectors: lanes 0-3 and 4-7.
+#[derive(Clone, Copy)]
+pub(super) struct Avx2([__m256d; 2]);
+
+impl Avx2 {
+    #[inline(always)]
+    unsafe fn each(self, b: Self, f: impl Fn(__m256d, __m256d) -> __m256d) -> Self {
+        Self([f(self.0[0], b.0[0]), f(self.0[1], b.0[1])])
+    }
+}
+
+operators!(Avx2: Add add => _mm256_add_pd, Sub sub => _mm256_sub_pd,
+           Mul mul => _mm256_mul_pd, Div div => _mm256_div_pd);
+
+impl Neg for Avx2 {
+    type Output = Self;
+    #[inline(always)]
+    fn neg(self) -> Self {
+        // SAFETY: as for the operators. The sign bit flipped, as scalar negation does.
+        unsafe {
+            let sign = _mm256_set1_pd(-0.0);
+            self.each(Self([sign; 2]), |x, s| _mm256_xor_pd(x, s))
+        }
+    }
+}
+
+impl Lane for Avx2 {
+    const WIDTH: usize = 8;
+    /// All ones in the lanes that are set.
+    type Mask = [__m256d; 2];
+    // SAFETY (every method): a value of this type exists only on a processor with AVX2
+    // (module documentation); `splat` is only called there too.
+    #[inline(always)]
+    fn splat(x: f64) -> Self {
+        unsafe { Self([_mm256_set1_pd(x); 2]) }
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        unsafe { Self([_mm256_sqrt_pd(self.0[0]), _mm256_sqrt_pd(self.0[1])]) }
+    }
+    #[inline(always)]
+    fn max(self, b: Self) -> Self {
+        unsafe { self.each(b, |x, y| _mm256_max_pd(x, y)) }
+    }
+    #[inline(always)]
+    fn exp(self) -> Self {
+        let a = avx2_array(self).map(f64::exp);
+        unsafe {
+            Self([
+                _mm256_loadu_pd(a.as_ptr()),
+                _mm256_loadu_pd(a.as_ptr().add(4)),
+            ])
+        }
+    }
+    #[inline(always)]
+    fn lt(self, b: Self) -> Self::Mask {
+        unsafe { self.each(b, |x, y| _mm256_cmp_pd::<_CMP_LT_OQ>(x, y)).0 }
+    }
+    #[inline(always)]
+    fn and(a: Self::Mask, b: Self::Mask) -> Self::Mask {
+        unsafe { Self(a).each(Self(b), |x, y| _mm256_and_pd(x, y)).0 }
+    }
+    #[inline(always)]
+    fn keep(self, m: Self::Mask) -> Self {
+        unsafe { Self(m).each(self, |m, x| _mm256_and_pd(m, x)) }
+    }
+    #[inline(always)]
+    fn select(m: Self::Mask, yes: Self, no: Self) -> Self {
+        unsafe {
+            Self([
+                _mm256_blendv_pd(no.0[0], yes.0[0], m[0]),
+                _mm256_blendv_pd(no.0[1], yes.0[1], m[1]),
+            ])
+        }
+    }
+    #[inline(always)]
+    fn sum(self) -> f64 {
+        reduce(avx2_array(self))
+    }
+}
+
+#[inline(always)]
+fn avx2_array(v: Avx2) -> [f64; 8] {
+    let mut a = [0.0; 8];
+    // SAFETY: as for the operators; the stores write the local array.
+    unsafe {
+        _mm256_storeu_pd(a.as_mut_ptr(), v.0[0]);
+        _mm256_storeu_pd(a.as_mut_ptr().add(4), v.0[1]);
+    }
+    a
+}
+
+impl Gather for Avx2 {
+    /// Record offsets, and the lanes in use as a mask.
+    type Index = ([__m128i; 2], [__m256d; 2]);
+    #[inline(always)]
+    unsafe fn index(js: &[u32], stride: usize, len: usize) -> Self::Index {
+        debug_assert!((1..=8).contains(&js.len()) && stride.is_power_of_two());
+        let shift = stride.trailing_zeros();
+        // Unused lanes gather nothing (masked off); their offset 0 is never read.
+        let mut j = [0i32; 8];
+        for (o, &x) in j.iter_mut().zip(js) {
+            assert!(
+                (x as usize) < len,
+                "neighbour index {x} beyond the {len} packed particles"
+            );
+            *o = (x << shift) as i32;
+        }
+        let used = |l: usize| if l < js.len() { -1i64 } else { 0 };
+        // SAFETY: the features (caller); the loads read the local array.
+        unsafe {
+            let lanes = |l: usize| {
+                _mm256_castsi256_pd(_mm256_set_epi64x(
+                    used(l + 3),
+                    used(l + 2),
+                    used(l + 1),
+                    used(l),
+                ))
+            };
+            let (lo, hi) = (
+                _mm_loadu_si128(j.as_ptr() as *const __m128i),
+                _mm_loadu_si128(j.as_ptr().add(4) as *const __m128i),
+            );
+            ([lo, hi], [lanes(0), lanes(4)])
+        }
+    }
+    #[inline(always)]
+    unsafe fn gather(index: Self::Index, base: *const f64, offset: usize, pad: f64) -> Self {
+        let (offsets, lanes) = index;
+        // SAFETY: the caller's contract; masked-off lanes are not read.
+        unsafe {
+            let src = _mm256_set1_pd(pad);
+            let p = base.add(offset);
+            Self([
+                _mm256_mask_i32gather_pd::<8>(src, p, offsets[0], lanes[0]),
+                _mm256_mask_i32gather_pd::<8>(src, p, offsets[1], lanes[1]),
+            ])
+        }
+    }
+}

@@ -1,0 +1,132 @@
+//! The neighbour loop of the rate stages (`Forces`, `Continuity`): a set of rate terms
+//! summed over every fluid particle's neighbours in one pass of the pair layer, and
+//! the results written into the particle columns.
+
+use crate::neighbour_grid::Neighbours;
+use crate::terms::RateTerms;
+use rayon::prelude::*;
+use sph_core::components::{Acceleration, DensityRate};
+use sph_core::pair::{with_records, EquationsOfMotion, Field, Pass, RateTerm};
+use sph_core::sim::Sim;
+use sph_core::stage::StepError;
+use sph_core::with_kernel;
+
+/// Marks that a stage writes the density rate, so that a second one refuses to.
+pub(crate) struct DensityRateWriter(pub &'static str);
+
+/// At setup: claims the density rate for `stage`, or refuses if another stage has.
+pub(crate) fn claim_density_rate(
+    sim: &mut Sim,
+    stage: &'static str,
+) -> Result<(), sph_core::stage::SetupError> {
+    if let Some(DensityRateWriter(other)) = sim.resources.get::<DensityRateWriter>() {
+        return Err(sph_core::stage::SetupError::new(
+            stage,
+            format!(
+                "`{other}` already writes the density rate (a Continuity() stage and a \
+                 Continuity() term of Forces); remove one of them"
+            ),
+        ));
+    }
+    sim.resources.insert(DensityRateWriter(stage));
+    Ok(())
+}
+
+/// Fluid particles per parallel chunk.
+const CHUNK: usize = 256;
+
+/// Which columns a pass writes.
+#[derive(Clone, Copy)]
+pub(crate) struct Outputs {
+    /// dv/dt = the terms' sum + gravity, into `Acceleration`.
+    pub acceleration: bool,
+    /// d rho/dt into `DensityRate`.
+    pub density_rate: bool,
+    /// The dissipation rate (1/2) sum_i m_i P_i, returned.
+    pub power: bool,
+}
+
+/// Sums `terms` for every fluid particle and writes `out`; returns the dissipation
+/// rate when asked (else 0). `chunk_power` keeps one partial sum per chunk of
+/// particles between steps; the chunks are added in order, so the total is the same
+/// for any thread count.
+pub(crate) fn run(
+    sim: &mut Sim,
+    terms: &RateTerms,
+    out: Outputs,
+    chunk_power: &mut Vec<f64>,
+) -> Result<f64, StepError> {
+    let eom = EquationsOfMotion(terms);
+    let power = with_records(sim, terms.reads(), |sim, particles, records| {
+        let Some(nb) = sim.resources.get::<Neighbours>() else {
+            return Ok(0.0);
+        };
+        let n = nb.n_fluid;
+        let mut acc = match out.acceleration {
+            true => Some(particles.fluid_mut::<Acceleration>()?),
+            false => None,
+        };
+        let mut rate = match out.density_rate {
+            true => Some(particles.fluid_mut::<DensityRate>()?),
+            false => None,
+        };
+        let lens = [
+            acc.as_ref().map(|a| a.len()),
+            rate.as_ref().map(|r| r.len()),
+        ];
+        if let Some(len) = lens.into_iter().flatten().find(|&len| len != n) {
+            return Err(StepError::Internal(format!(
+                "the neighbour lists cover {n} fluid particles but the world holds {len}"
+            )));
+        }
+        let acc: &mut [Acceleration] = acc.as_deref_mut().unwrap_or(&mut []);
+        let rate: &mut [DensityRate] = rate.as_deref_mut().unwrap_or(&mut []);
+        let chunks = n.div_ceil(CHUNK);
+        chunk_power.clear();
+        chunk_power.resize(if out.power { chunks } else { 0 }, 0.0);
+        let (c, g) = (&sim.constants, sim.constants.gravity);
+        with_kernel!(c.kernel, c.h, |k| {
+            let pass =
+                Pass::new(&eom, k, records).map_err(|e| StepError::Internal(e.to_string()))?;
+            optional_pieces(acc, n, CHUNK)
+                .zip(optional_pieces(rate, n, CHUNK))
+                .zip(optional_pieces(&mut chunk_power[..], chunks, 1))
+                .enumerate()
+                .for_each(|(c, ((mut acc, mut rate), power))| {
+                    let mut sum = 0.0;
+                    for k in 0..(n - c * CHUNK).min(CHUNK) {
+                        let i = c * CHUNK + k;
+                        let s = pass.sum(i, nb.of(i));
+                        if let Some(a) = acc.as_deref_mut() {
+                            a[k].0 = s.acc + g;
+                        }
+                        if let Some(r) = rate.as_deref_mut() {
+                            r[k].0 = s.drho;
+                        }
+                        sum += 0.5 * records.get(i, Field::Mass) * s.power;
+                    }
+                    if let Some(p) = power {
+                        p[0] = sum;
+                    }
+                });
+            Ok::<(), StepError>(())
+        })?;
+        Ok(chunk_power.iter().sum())
+    })?;
+    Ok(power.unwrap_or(0.0))
+}
+
+/// Pieces of `per` elements of an optional output of `len` elements: the slice's own
+/// pieces if it holds exactly `len`, else as many `None`s (the output is not wanted).
+fn optional_pieces<T: Send>(
+    out: &mut [T],
+    len: usize,
+    per: usize,
+) -> impl IndexedParallelIterator<Item = Option<&mut [T]>> {
+    use rayon::iter::Either;
+    if out.len() == len && len > 0 {
+        Either::Left(out.par_chunks_mut(per).map(Some))
+    } else {
+        Either::Right((0..len.div_ceil(per)).into_par_iter().map(|_| None))
+    }
+}

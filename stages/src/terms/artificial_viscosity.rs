@@ -1,0 +1,86 @@
+//! Monaghan's artificial viscosity (docs/physics.md, "Artificial viscosity"): for
+//! approaching pairs (v_ij . x_ij < 0),
+//!   Pi_ij = (-alpha cbar_ij phi_ij + beta phi_ij^2) / rhobar_ij,
+//!   phi_ij = h v_ij . x_ij / (r_ij^2 + eta^2),  eta^2 = 0.01 h^2,
+//! with cbar and rhobar the pair's mean sound speed and density, added to the
+//! momentum equation as dv_i/dt = - sum_j m_j Pi_ij grad_i W_ij. It dissipates
+//! (1/2) sum_i m_i sum_j m_j Pi_ij v_ij . grad_i W_ij of kinetic energy per second.
+
+use super::{check_non_negative, Term};
+use serde::{Deserialize, Serialize};
+use sph_core::pair::{Field, Fields, Lane, Me, Pair, RateTerm, Rates};
+use sph_core::sim::Constants;
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Params {
+    /// Linear coefficient alpha. Default 0.03 (the paper's dam break).
+    pub alpha: f64,
+    /// Quadratic coefficient beta (for shocks). Default 0.
+    pub beta: f64,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Self {
+            alpha: 0.03,
+            beta: 0.0,
+        }
+    }
+}
+
+pub struct ArtificialViscosity {
+    alpha: f64,
+    beta: f64,
+    h: f64,
+    /// eta^2 = 0.01 h^2.
+    eta2: f64,
+}
+
+impl ArtificialViscosity {
+    /// The linear coefficient alpha.
+    pub fn alpha(&self) -> f64 {
+        self.alpha
+    }
+}
+
+impl Term for ArtificialViscosity {
+    type Params = Params;
+    fn check(p: &Params) -> Result<(), String> {
+        check_non_negative(&[("alpha", p.alpha), ("beta", p.beta)])
+    }
+    fn build(p: &Params, c: &Constants) -> Self {
+        Self {
+            alpha: p.alpha,
+            beta: p.beta,
+            h: c.h,
+            eta2: 0.01 * c.h * c.h,
+        }
+    }
+}
+
+impl RateTerm for ArtificialViscosity {
+    fn reads(&self) -> Fields {
+        Fields::of(&[Field::Vx, Field::Vy, Field::Rho, Field::Sound])
+    }
+    fn uses_coef(&self) -> bool {
+        true
+    }
+    #[inline(always)]
+    fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
+        let c = L::splat;
+        let (wx, wy) = (
+            me.lanes::<L>(Field::Vx) - p.j(Field::Vx),
+            me.lanes::<L>(Field::Vy) - p.j(Field::Vy),
+        );
+        let vx = wx * p.dx + wy * p.dy;
+        let phi = c(self.h) * vx / (p.r * p.r + c(self.eta2));
+        let cbar = c(0.5) * (me.lanes::<L>(Field::Sound) + p.j(Field::Sound));
+        let num = c(-self.alpha) * cbar * phi + c(self.beta) * phi * phi;
+        let rhobar = c(0.5) * (me.lanes::<L>(Field::Rho) + p.j(Field::Rho));
+        let visc = (num / rhobar).keep(vx.lt(L::zero()));
+        r.coef = r.coef + visc;
+        let vij_grad = wx * p.gx + wy * p.gy;
+        r.power = r.power + p.j(Field::Mass) * visc * vij_grad;
+    }
+}

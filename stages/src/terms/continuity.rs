@@ -1,0 +1,35 @@
+//! The continuity equation (docs/physics.md, "Governing equations"):
+//!   d rho_i/dt = sum_j m_j v_ij . grad_i W_ij.
+
+use super::Term;
+use serde::{Deserialize, Serialize};
+use sph_core::pair::{Field, Fields, Lane, Me, Pair, RateTerm, Rates};
+use sph_core::sim::Constants;
+
+/// `Continuity()`: no parameters.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Params {}
+
+pub struct Continuity;
+
+impl Term for Continuity {
+    type Params = Params;
+    fn build(_: &Params, _: &Constants) -> Self {
+        Continuity
+    }
+}
+
+impl RateTerm for Continuity {
+    fn reads(&self) -> Fields {
+        Fields::of(&[Field::Vx, Field::Vy])
+    }
+    #[inline(always)]
+    fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
+        let (wx, wy) = (
+            me.lanes::<L>(Field::Vx) - p.j(Field::Vx),
+            me.lanes::<L>(Field::Vy) - p.j(Field::Vy),
+        );
+        r.drho = r.drho + p.j(Field::Mass) * (wx * p.gx + wy * p.gy);
+    }
+}

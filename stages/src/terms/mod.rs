@@ -1,0 +1,127 @@
+//! The pair terms: one file per term, each written once over the lane type of
+//! `sph_core::pair` (so the scalar and the SIMD path are the same source).
+//!
+//! Terms of the equations of motion ([`RateTerm`]s) are named in a scenario's
+//! `Forces(terms: [...])` and run in one neighbour loop. A new one is a file here with
+//! its `Params` and a [`Term`] impl, and one line in the [`rate_terms!`] list below;
+//! the list fixes the order in which the terms of one pair are added, whatever the
+//! order the scenario names them in. The density filters ([`shepard`], [`mls`]) are
+//! pair terms of their own, with their own accumulators.
+
+pub mod artificial_pressure;
+pub mod artificial_viscosity;
+pub mod continuity;
+pub mod laminar_viscosity;
+pub mod mls;
+pub mod pressure_gradient;
+pub mod shepard;
+
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
+use sph_core::pair::{Fields, Lane, Me, Pair, RateTerm, Rates};
+use sph_core::sim::Constants;
+
+/// A rate term built from its scenario parameters.
+pub trait Term: RateTerm + Sized {
+    /// The parameters a scenario gives it, with documented defaults.
+    type Params: Clone + std::fmt::Debug + Default + Serialize + DeserializeOwned;
+    /// Refuses out-of-range parameters with a message naming the field and what is
+    /// accepted (run when the scenario is read, so the error has its position).
+    fn check(_p: &Self::Params) -> Result<(), String> {
+        Ok(())
+    }
+    /// The term for a run with constants `c`, from checked parameters.
+    fn build(p: &Self::Params, c: &Constants) -> Self;
+}
+
+/// Checks that every `(field, value)` is a finite number >= 0.
+pub(crate) fn check_non_negative(fields: &[(&str, f64)]) -> Result<(), String> {
+    for &(field, v) in fields {
+        if !(v >= 0.0 && v.is_finite()) {
+            return Err(format!(
+                "field `{field}` = {v} is out of range; accepted: a finite number >= 0"
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Declares the rate terms a scenario can name: the [`TermSpec`] enum a term list is
+/// read into, and [`RateTerms`], the chosen terms, summed in the order listed.
+macro_rules! rate_terms {
+    ($($module:ident :: $ty:ident),* $(,)?) => {
+        /// A term as a scenario names it: `Name(field: value, ...)`.
+        #[derive(Clone, Debug, Serialize, Deserialize)]
+        pub enum TermSpec {
+            $($ty(<$module::$ty as Term>::Params),)*
+        }
+
+        impl TermSpec {
+            /// The name a scenario writes.
+            pub fn name(&self) -> &'static str {
+                match self {
+                    $(TermSpec::$ty(_) => stringify!($ty),)*
+                }
+            }
+        }
+
+        /// The terms of one pair stage, each at most once.
+        #[derive(Default)]
+        pub struct RateTerms {
+            $(pub $module: Option<$module::$ty>,)*
+        }
+
+        impl RateTerms {
+            /// Checks a term list: each term at most once, its parameters in range.
+            pub fn check(specs: &[TermSpec]) -> Result<(), String> {
+                for (k, spec) in specs.iter().enumerate() {
+                    if specs[..k].iter().any(|s| s.name() == spec.name()) {
+                        return Err(format!(
+                            "field `terms`: {} is named twice; name each term once",
+                            spec.name()
+                        ));
+                    }
+                    let checked = match spec {
+                        $(TermSpec::$ty(p) => $module::$ty::check(p),)*
+                    };
+                    checked.map_err(|e| format!("term {}: {e}", spec.name()))?;
+                }
+                Ok(())
+            }
+
+            /// The terms of a checked list for a run with constants `c`.
+            pub fn build(specs: &[TermSpec], c: &Constants) -> Self {
+                let mut set = RateTerms::default();
+                for spec in specs {
+                    match spec {
+                        $(TermSpec::$ty(p) => set.$module = Some($module::$ty::build(p, c)),)*
+                    }
+                }
+                set
+            }
+        }
+
+        impl RateTerm for RateTerms {
+            fn reads(&self) -> Fields {
+                let mut f = Fields::default();
+                $(if let Some(t) = &self.$module { f = f.with(t.reads()); })*
+                f
+            }
+            fn uses_coef(&self) -> bool {
+                false $(|| self.$module.as_ref().is_some_and(|t| t.uses_coef()))*
+            }
+            #[inline(always)]
+            fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
+                $(if let Some(t) = &self.$module { t.pair(me, p, r); })*
+            }
+        }
+    };
+}
+
+rate_terms! {
+    pressure_gradient::PressureGradient,
+    artificial_viscosity::ArtificialViscosity,
+    artificial_pressure::ArtificialPressure,
+    laminar_viscosity::LaminarViscosity,
+    continuity::Continuity,
+}
