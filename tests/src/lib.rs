@@ -1,5 +1,4 @@
-//! Test support and an example plugin stage (see `plugin`).
+//! Test support: scenario loading and runs, CSV reading, stability checks.
 
-pub mod plugin;
 pub mod stability;
 pub mod support;

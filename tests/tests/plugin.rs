@@ -1,16 +1,19 @@
-//! The example plugin stage (`sph_tests::plugin::MaxSpeed`) runs in a scenario next to
+//! The example plugin stage (`max_speed::MaxSpeed`) runs in a scenario next to
 //! the standard stages, and a registry without it refuses the scenario.
 
 use sph_core::runner::{run, RunOptions};
 use sph_core::Scenario;
 use std::path::Path;
 
-const FILE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/scenarios/plugin.ron");
+const FILE: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../plugins/max-speed/max_speed.ron"
+);
 
 #[test]
 fn plugin_stage_runs_and_writes_its_series() {
     let mut registry = sph_stages::standard_registry();
-    sph_tests::plugin::register(&mut registry);
+    max_speed::register(&mut registry);
     let scenario =
         Scenario::load(Path::new(FILE), &[], &registry).unwrap_or_else(|e| panic!("{e}"));
     // Speed bound. Free fall (g t = 0.49 m/s at 0.05 s) is no bound here: the pressure
@@ -40,7 +43,7 @@ fn plugin_stage_runs_and_writes_its_series() {
     let json = std::fs::read_to_string(out.join("summary.json")).expect("summary.json");
     assert!(json.contains("\"max_speed\""), "{json}");
 
-    let csv = std::fs::read_to_string(out.join(sph_tests::plugin::CSV)).expect("max_speed.csv");
+    let csv = std::fs::read_to_string(out.join(max_speed::CSV)).expect("max_speed.csv");
     println!("{csv}diagnostics: {:?}", summary.diagnostics);
     let mut lines = csv.lines();
     assert_eq!(lines.next(), Some("time,max_speed"));

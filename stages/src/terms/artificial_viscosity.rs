@@ -69,10 +69,7 @@ impl RateTerm for ArtificialViscosity {
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
         let c = L::splat;
-        let (wx, wy) = (
-            me.lanes::<L>(Field::Vx) - p.j(Field::Vx),
-            me.lanes::<L>(Field::Vy) - p.j(Field::Vy),
-        );
+        let (wx, wy) = p.v_ij(me);
         let vx = wx * p.dx + wy * p.dy;
         let phi = c(self.h) * vx / (p.r * p.r + c(self.eta2));
         let cbar = c(0.5) * (me.lanes::<L>(Field::Sound) + p.j(Field::Sound));

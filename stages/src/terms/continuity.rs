@@ -26,10 +26,7 @@ impl RateTerm for Continuity {
     }
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
-        let (wx, wy) = (
-            me.lanes::<L>(Field::Vx) - p.j(Field::Vx),
-            me.lanes::<L>(Field::Vy) - p.j(Field::Vy),
-        );
+        let (wx, wy) = p.v_ij(me);
         r.drho = r.drho + p.j(Field::Mass) * (wx * p.gx + wy * p.gy);
     }
 }

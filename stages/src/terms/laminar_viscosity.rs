@@ -52,10 +52,7 @@ impl RateTerm for LaminarViscosity {
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
         let c = L::splat;
-        let (wx, wy) = (
-            me.lanes::<L>(Field::Vx) - p.j(Field::Vx),
-            me.lanes::<L>(Field::Vy) - p.j(Field::Vy),
-        );
+        let (wx, wy) = p.v_ij(me);
         let x_grad = p.dx * p.gx + p.dy * p.gy;
         let rho_ij = me.lanes::<L>(Field::Rho) * p.j(Field::Rho);
         let k = c(self.mu_sum) * x_grad / (rho_ij * (p.r * p.r + c(self.eta2)));

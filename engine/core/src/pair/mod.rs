@@ -155,6 +155,15 @@ impl<L: Lane> Pair<'_, L> {
             )
         }
     }
+
+    /// The relative velocity v_ij = v_i - v_j (the records must hold `Vx` and `Vy`).
+    #[inline(always)]
+    pub fn v_ij(&self, me: &Me) -> (L, L) {
+        (
+            me.lanes::<L>(Field::Vx) - self.j(Field::Vx),
+            me.lanes::<L>(Field::Vy) - self.j(Field::Vy),
+        )
+    }
 }
 
 /// A sum over a particle's neighbours, written once over the lane type.

@@ -1,5 +1,6 @@
-//! An example plugin stage, defined outside `engine/` and `stages/`: the worked example
-//! of how to add a stage.
+//! An example plugin: a stage defined in a crate of its own, outside `engine/` and
+//! `stages/`, the worked example of how to add a stage. `src/main.rs` is the `engine`
+//! command with it registered: `cargo run --release -p max-speed -- plugins/max-speed/max_speed.ron`.
 //!
 //! `MaxSpeed` measures the largest fluid speed each step, keeps it in the run's
 //! diagnostics (`summary.json`) and writes it to `max_speed.csv` every `interval`
@@ -51,7 +52,7 @@
 //!    ```no_run
 //!    fn main() -> std::process::ExitCode {
 //!        let mut registry = sph_stages::standard_registry();
-//!        sph_tests::plugin::register(&mut registry);
+//!        max_speed::register(&mut registry);
 //!        engine::main_with(registry)
 //!    }
 //!    ```
@@ -59,7 +60,8 @@
 //!    The scenario names the stage in CamelCase (`MaxSpeed(...)`); a registry without
 //!    the plugin refuses the file with "unknown stage `MaxSpeed`".
 //!
-//! `tests/tests/plugin.rs` runs this stage on `tests/scenarios/plugin.ron`.
+//! `tests/tests/plugin.rs` runs this stage on `plugins/max-speed/max_speed.ron`, and the
+//! binary on it.
 
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
