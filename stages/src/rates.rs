@@ -3,10 +3,10 @@
 //! the results written into the particle columns.
 
 use crate::neighbour_grid::Neighbours;
-use crate::terms::RateTerms;
+use crate::terms::{Fixed, RateTerms, TermBit};
 use rayon::prelude::*;
 use sph_core::components::{Acceleration, DensityRate};
-use sph_core::pair::{with_records, EquationsOfMotion, Field, Pass, RateTerm};
+use sph_core::pair::{with_records, EquationsOfMotion, Pass, RateTerm};
 use sph_core::sim::Sim;
 use sph_core::stage::StepError;
 use sph_core::with_kernel;
@@ -53,6 +53,41 @@ pub(crate) struct Outputs {
 pub(crate) fn run(
     sim: &mut Sim,
     terms: &RateTerms,
+    out: Outputs,
+    chunk_power: &mut Vec<f64>,
+) -> Result<f64, StepError> {
+    const fn bits(list: &[TermBit]) -> u8 {
+        let (mut set, mut k) = (0, 0);
+        while k < list.len() {
+            set |= 1 << list[k] as u8;
+            k += 1;
+        }
+        set
+    }
+    use TermBit::*;
+    // The shipped scenarios' sets get loops compiled for them.
+    const SPLASH: u8 = bits(&[
+        PressureGradient,
+        ArtificialViscosity,
+        ArtificialPressure,
+        Continuity,
+    ]);
+    const WAVES: u8 = bits(&[PressureGradient, ArtificialViscosity, Continuity]);
+    const PLAIN: u8 = bits(&[PressureGradient, ArtificialViscosity]);
+    const DENSITY: u8 = bits(&[Continuity]);
+    match terms.set() {
+        SPLASH => run_set(sim, &Fixed::<SPLASH>(terms), out, chunk_power),
+        WAVES => run_set(sim, &Fixed::<WAVES>(terms), out, chunk_power),
+        PLAIN => run_set(sim, &Fixed::<PLAIN>(terms), out, chunk_power),
+        DENSITY => run_set(sim, &Fixed::<DENSITY>(terms), out, chunk_power),
+        _ => run_set(sim, terms, out, chunk_power),
+    }
+}
+
+/// [`run`] for a term set `terms`.
+fn run_set<R: RateTerm>(
+    sim: &mut Sim,
+    terms: &R,
     out: Outputs,
     chunk_power: &mut Vec<f64>,
 ) -> Result<f64, StepError> {
@@ -103,7 +138,7 @@ pub(crate) fn run(
                         if let Some(r) = rate.as_deref_mut() {
                             r[k].0 = s.drho;
                         }
-                        sum += 0.5 * records.get(i, Field::Mass) * s.power;
+                        sum += s.power;
                     }
                     if let Some(p) = power {
                         p[0] = sum;

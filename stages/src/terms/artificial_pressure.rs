@@ -68,9 +68,7 @@ impl RateTerm for ArtificialPressure {
     fn reads(&self) -> Fields {
         Fields::of(&[Field::PRho2])
     }
-    fn uses_coef(&self) -> bool {
-        true
-    }
+    const USES_COEF: bool = true;
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
         let (c, zero) = (L::splat, L::zero());

@@ -63,9 +63,7 @@ impl RateTerm for ArtificialViscosity {
     fn reads(&self) -> Fields {
         Fields::of(&[Field::Vx, Field::Vy, Field::Rho, Field::Sound])
     }
-    fn uses_coef(&self) -> bool {
-        true
-    }
+    const USES_COEF: bool = true;
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
         let c = L::splat;

@@ -71,6 +71,34 @@ macro_rules! rate_terms {
             $(pub $module: Option<$module::$ty>,)*
         }
 
+        /// Each term's bit in a [`RateTerms::set`].
+        #[derive(Clone, Copy)]
+        #[repr(u8)]
+        pub enum TermBit {
+            $($ty,)*
+        }
+
+        /// A term set with the terms known at compile time: bit k of `SET` for the
+        /// k-th term of the list. The loop of a set that a stage runs often is compiled
+        /// for it (no test per term and pair, no code for the absent terms).
+        pub struct Fixed<'a, const SET: u8>(pub &'a RateTerms);
+
+        impl<const SET: u8> RateTerm for Fixed<'_, SET> {
+            const USES_COEF: bool =
+                false $(|| (SET & (1 << TermBit::$ty as u8) != 0 && <$module::$ty as RateTerm>::USES_COEF))*;
+            fn reads(&self) -> Fields {
+                self.0.reads()
+            }
+            #[inline(always)]
+            fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
+                $(if SET & (1 << TermBit::$ty as u8) != 0 {
+                    if let Some(t) = &self.0.$module {
+                        t.pair(me, p, r);
+                    }
+                })*
+            }
+        }
+
         impl RateTerms {
             /// Checks a term list: each term at most once, its parameters in range.
             pub fn check(specs: &[TermSpec]) -> Result<(), String> {
@@ -87,6 +115,11 @@ macro_rules! rate_terms {
                     checked.map_err(|e| format!("term {}: {e}", spec.name()))?;
                 }
                 Ok(())
+            }
+
+            /// The terms present, bit k for the k-th term of the list ([`TermBit`]).
+            pub fn set(&self) -> u8 {
+                0 $(| if self.$module.is_some() { 1 << TermBit::$ty as u8 } else { 0 })*
             }
 
             /// The terms of a checked list for a run with constants `c`.
@@ -107,9 +140,8 @@ macro_rules! rate_terms {
                 $(if let Some(t) = &self.$module { f = f.with(t.reads()); })*
                 f
             }
-            fn uses_coef(&self) -> bool {
-                false $(|| self.$module.as_ref().is_some_and(|t| t.uses_coef()))*
-            }
+            // Any set: multiplied out always (C_ij = 0 adds nothing).
+            const USES_COEF: bool = true;
             #[inline(always)]
             fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
                 $(if let Some(t) = &self.$module { t.pair(me, p, r); })*

@@ -25,9 +25,7 @@ impl RateTerm for PressureGradient {
     fn reads(&self) -> Fields {
         Fields::of(&[Field::PRho2])
     }
-    fn uses_coef(&self) -> bool {
-        true
-    }
+    const USES_COEF: bool = true;
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
         r.coef = r.coef + (me.lanes::<L>(Field::PRho2) + p.j(Field::PRho2));

@@ -57,31 +57,28 @@ pub trait Lane:
 /// pressure, 6 and 7 for Tait with gamma = 7) written out, others by repeated squaring.
 #[inline(always)]
 pub fn whole_pow<L: Lane>(x: L, n: u32) -> L {
-    match n {
-        4 => {
-            let x2 = x * x;
-            x2 * x2
-        }
-        6 => {
-            let x3 = x * x * x;
-            x3 * x3
-        }
-        7 => {
-            let x3 = x * x * x;
-            x3 * x3 * x
-        }
-        _ => {
-            let (mut base, mut e, mut out) = (x, n, L::splat(1.0));
-            while e > 0 {
-                if e & 1 == 1 {
-                    out = out * base;
-                }
-                base = base * base;
-                e >>= 1;
-            }
-            out
-        }
+    // Tests in this order rather than a `match`, which compiles to a jump table.
+    if n == 4 {
+        let x2 = x * x;
+        return x2 * x2;
     }
+    if n == 7 {
+        let x3 = x * x * x;
+        return x3 * x3 * x;
+    }
+    if n == 6 {
+        let x3 = x * x * x;
+        return x3 * x3;
+    }
+    let (mut base, mut e, mut out) = (x, n, L::splat(1.0));
+    while e > 0 {
+        if e & 1 == 1 {
+            out = out * base;
+        }
+        base = base * base;
+        e >>= 1;
+    }
+    out
 }
 
 impl Lane for f64 {

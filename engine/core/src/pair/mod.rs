@@ -120,10 +120,11 @@ impl Me {
 
 /// A group of neighbours j of particle i (one, or up to eight in lanes) with the
 /// geometry every term shares: x_ij = x_i - x_j, r_ij, q = r/h, W_ij and
-/// grad_i W_ij. The lanes of a group beyond its neighbours hold a padding particle
-/// of zero mass beyond the support (W = grad W = 0), so they add nothing to a term
-/// that is weighted by m_j, W or grad W.
-pub struct Pair<'a, L: Lane> {
+/// grad_i W_ij, and the fields of j the pass's term reads (each gathered once per
+/// group, however many terms read it). The lanes of a group beyond its neighbours
+/// hold a padding particle of zero mass beyond the support (W = grad W = 0), so they
+/// add nothing to a term that is weighted by m_j, W or grad W.
+pub struct Pair<L: Lane> {
     pub dx: L,
     pub dy: L,
     pub r: L,
@@ -133,30 +134,18 @@ pub struct Pair<'a, L: Lane> {
     /// grad_i W_ij = x_ij (dW/dr)/r.
     pub gx: L,
     pub gy: L,
-    index: L::Index,
-    records: &'a Records,
-    pad: &'a [f64; Field::COUNT],
+    fields: [L; Field::COUNT],
 }
 
-impl<L: Lane> Pair<'_, L> {
-    /// Field `f` of the neighbours (the padding value in unused lanes).
+impl<L: Lane> Pair<L> {
+    /// Field `f` of the neighbours (the padding value in unused lanes; 0 for a field
+    /// the term does not declare in [`PairTerm::reads`]).
     #[inline(always)]
     pub fn j(&self, f: Field) -> L {
-        let offset = self.records.offset(f);
-        // SAFETY: `index` came from `Gather::index` with this buffer's length and
-        // stride (in `Pass::drive`), `offset < stride` (`Records::offset`), and L's
-        // instructions exist here (a value of L exists).
-        unsafe {
-            L::gather(
-                self.index,
-                self.records.base(),
-                offset,
-                self.pad[f as usize],
-            )
-        }
+        self.fields[f as usize]
     }
 
-    /// The relative velocity v_ij = v_i - v_j (the records must hold `Vx` and `Vy`).
+    /// The relative velocity v_ij = v_i - v_j (the term must read `Vx` and `Vy`).
     #[inline(always)]
     pub fn v_ij(&self, me: &Me) -> (L, L) {
         (
@@ -242,25 +231,53 @@ impl<'a, T: PairTerm, K: Kernel> Pass<'a, T, K> {
     /// If `i` or a neighbour index is beyond the records.
     #[inline]
     pub fn sum(&self, i: usize, neighbours: &[u32]) -> T::Out {
-        match self.isa.0 {
-            // SAFETY: f64 needs no instructions beyond the baseline.
-            IsaKind::Scalar => unsafe { self.drive::<f64>(i, neighbours) },
-            // SAFETY: an `Isa` of this kind exists only where the processor has it.
-            #[cfg(target_arch = "x86_64")]
-            IsaKind::Avx512 => unsafe { x86::sum_avx512(self, i, neighbours) },
-            // SAFETY: as above.
-            #[cfg(target_arch = "x86_64")]
-            IsaKind::Avx2 => unsafe { x86::sum_avx2(self, i, neighbours) },
+        /// The shipped momentum pass's fields (every field).
+        const ALL: u16 = Fields::of(&Field::ALL).bits();
+        /// The Shepard and MLS filters' (x, y, rho, m).
+        const FILTER: u16 = Fields::GEOMETRY.with(Fields::of(&[Field::Rho])).bits();
+        // The common field sets get a loop compiled for them (known offsets, no test
+        // per field); any other set is read with offsets found at run time.
+        macro_rules! on {
+            ($f:ident) => {
+                match self.records.fields().bits() {
+                    ALL => $f::<T, K, ALL>(self, i, neighbours),
+                    FILTER => $f::<T, K, FILTER>(self, i, neighbours),
+                    _ => $f::<T, K, 0>(self, i, neighbours),
+                }
+            };
+        }
+        // SAFETY: f64 needs no instructions beyond the baseline; an `Isa` of a SIMD
+        // kind exists only where the processor has it.
+        unsafe {
+            match self.isa.0 {
+                IsaKind::Scalar => {
+                    let scalar = |p: &Self, i, js| p.drive::<f64, 0>(i, js);
+                    scalar(self, i, neighbours)
+                }
+                #[cfg(target_arch = "x86_64")]
+                IsaKind::Avx512 => {
+                    use x86::sum_avx512 as f;
+                    on!(f)
+                }
+                #[cfg(target_arch = "x86_64")]
+                IsaKind::Avx2 => {
+                    use x86::sum_avx2 as f;
+                    on!(f)
+                }
+            }
         }
     }
 
     /// The neighbour loop on lane type `L`: the shared geometry of each group of
-    /// neighbours, then the term.
+    /// neighbours and the fields the term reads, then the term. `FIELDS` is the
+    /// records' field set when it is known at compile time (so are the offsets), 0
+    /// for one found at run time.
     ///
     /// # Safety
-    /// L's instructions exist on this processor.
+    /// L's instructions exist on this processor; a nonzero `FIELDS` is the records'
+    /// field set.
     #[inline(always)]
-    unsafe fn drive<L: Lane>(&self, i: usize, neighbours: &[u32]) -> T::Out {
+    unsafe fn drive<L: Lane, const FIELDS: u16>(&self, i: usize, neighbours: &[u32]) -> T::Out {
         let (rec, k) = (self.records, &self.kernel);
         let me = rec.particle(i);
         let mut pad = me.values;
@@ -269,22 +286,38 @@ impl<'a, T: PairTerm, K: Kernel> Pass<'a, T, K> {
             pad[f as usize] = 0.0;
         }
         let (base, stride, len) = (rec.base(), rec.stride(), rec.len());
-        let (ox, oy) = (rec.offset(Field::X), rec.offset(Field::Y));
+        // The fields gathered for every group: x, y and m (the geometry), and those
+        // the term reads (checked to be in the records by `Pass::new`).
+        let reads = self.term.reads().with(Fields::GEOMETRY);
+        let wanted = Field::ALL.map(|f| match FIELDS {
+            0 => reads.contains(f),
+            known => Fields(known).contains(f),
+        });
+        let offsets = Field::ALL.map(|f| match FIELDS {
+            0 => rec.offset(f),
+            known => Fields(known).offset(f),
+        });
         let (xi, yi) = (L::splat(me.get(Field::X)), L::splat(me.get(Field::Y)));
         let inv_h = L::splat(k.inv_h());
         let mut acc = self.term.zero::<L>();
         for js in neighbours.chunks(L::WIDTH) {
+            let mut fields = [L::zero(); Field::COUNT];
             // SAFETY: L's instructions exist (caller); `index` checks every index
-            // against `len`, and the gathers read records of this buffer.
-            let (index, xj, yj) = unsafe {
+            // against `len`; the gathers read records of this buffer at offsets below
+            // its stride.
+            unsafe {
                 let index = L::index(js, stride, len);
-                (
-                    index,
-                    L::gather(index, base, ox, pad[Field::X as usize]),
-                    L::gather(index, base, oy, pad[Field::Y as usize]),
-                )
-            };
-            let (dx, dy) = (xi - xj, yi - yj);
+                for f in Field::ALL {
+                    let f = f as usize;
+                    if wanted[f] {
+                        fields[f] = L::gather(index, base, offsets[f], pad[f]);
+                    }
+                }
+            }
+            let (dx, dy) = (
+                xi - fields[Field::X as usize],
+                yi - fields[Field::Y as usize],
+            );
             let r = (dx * dx + dy * dy).sqrt();
             let q = r * inv_h;
             let f = k.grad_factor_at(q, r);
@@ -296,9 +329,7 @@ impl<'a, T: PairTerm, K: Kernel> Pass<'a, T, K> {
                 w: k.w_at(q),
                 gx: dx * f,
                 gy: dy * f,
-                index,
-                records: rec,
-                pad: &pad,
+                fields,
             };
             self.term.pair(&me, &p, &mut acc);
         }

@@ -27,10 +27,9 @@ pub struct Rates<L> {
 pub trait RateTerm: Sync {
     /// The fields of i and j the term reads.
     fn reads(&self) -> Fields;
-    /// Whether the term adds to [`Rates::coef`].
-    fn uses_coef(&self) -> bool {
-        false
-    }
+    /// Whether the term adds to [`Rates::coef`] (known at compile time, so a loop
+    /// without such terms does not multiply it out).
+    const USES_COEF: bool = false;
     /// Adds this term's contribution of one group of neighbours.
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>);
 }
@@ -42,7 +41,8 @@ pub struct RateSums {
     pub acc: DVec2,
     /// d rho_i/dt [kg/m^3/s].
     pub drho: f64,
-    /// P_i: see [`Rates::power`].
+    /// Particle i's share of the dissipation rate, (1/2) m_i P_i (see
+    /// [`Rates::power`]) [W per metre of depth].
     pub power: f64,
 }
 
@@ -73,7 +73,7 @@ impl<R: RateTerm> PairTerm for EquationsOfMotion<'_, R> {
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
         r.coef = L::zero();
         self.0.pair(me, p, r);
-        if self.0.uses_coef() {
+        if R::USES_COEF {
             let mt = p.j(Field::Mass) * r.coef;
             r.ax = r.ax - mt * p.gx;
             r.ay = r.ay - mt * p.gy;
@@ -81,11 +81,11 @@ impl<R: RateTerm> PairTerm for EquationsOfMotion<'_, R> {
     }
 
     #[inline(always)]
-    fn finish<L: Lane>(&self, _: &Me, r: Rates<L>) -> RateSums {
+    fn finish<L: Lane>(&self, me: &Me, r: Rates<L>) -> RateSums {
         RateSums {
             acc: DVec2::new(r.ax.sum(), r.ay.sum()),
             drho: r.drho.sum(),
-            power: r.power.sum(),
+            power: 0.5 * me.get(Field::Mass) * r.power.sum(),
         }
     }
 }

@@ -55,7 +55,7 @@ impl Field {
 
 /// A set of [`Field`]s.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Fields(u16);
+pub struct Fields(pub(crate) u16);
 
 impl Fields {
     /// What every pass packs: the geometry and the mass (the padding lanes of a group
@@ -85,6 +85,15 @@ impl Fields {
     }
     pub const fn is_empty(self) -> bool {
         self.0 == 0
+    }
+    /// The set as bits, bit k for the field of discriminant k.
+    pub const fn bits(self) -> u16 {
+        self.0
+    }
+    /// Offset of field `f` in a record holding this set (fields in `Field` order):
+    /// how many fields of the set come before it.
+    pub(crate) const fn offset(self, f: Field) -> usize {
+        (self.0 & ((1u16 << f as u16) - 1)).count_ones() as usize
     }
 }
 
@@ -161,16 +170,14 @@ impl Records {
     ///
     /// # Panics
     /// If `i` is beyond the records.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn particle(&self, i: usize) -> super::Me {
         assert!(i < self.len, "particle {i} of {} records", self.len);
         let record = &bytemuck_lines_ref(&self.lines)[i * self.stride..][..self.stride];
-        let mut values = [0.0; Field::COUNT];
-        for f in Field::ALL {
-            if self.fields.contains(f) {
-                values[f as usize] = record[self.offset(f)];
-            }
-        }
+        let values = Field::ALL.map(|f| match self.fields.contains(f) {
+            true => record[self.offsets[f as usize]],
+            false => 0.0,
+        });
         super::Me { values, index: i }
     }
 
@@ -178,11 +185,9 @@ impl Records {
     /// contents are left to be filled.
     fn shape(&mut self, fields: Fields, len: usize) {
         let fields = fields.with(Fields::GEOMETRY);
-        let mut at = 0;
         for f in Field::ALL {
             self.offsets[f as usize] = if fields.contains(f) {
-                at += 1;
-                at - 1
+                fields.offset(f)
             } else {
                 0
             };

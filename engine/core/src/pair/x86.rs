@@ -11,32 +11,32 @@ use super::{Kernel, PairTerm, Pass};
 use std::arch::x86_64::*;
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
-/// The pass's sum for particle `i` with AVX-512 lanes.
+/// The pass's sum for particle `i` with AVX-512 lanes (`FIELDS`: see `Pass::drive`).
 ///
 /// # Safety
 /// The processor has AVX-512F and AVX-512VL.
 #[target_feature(enable = "avx512f,avx512vl")]
-pub(super) unsafe fn sum_avx512<T: PairTerm, K: Kernel>(
+pub(super) unsafe fn sum_avx512<T: PairTerm, K: Kernel, const FIELDS: u16>(
     pass: &Pass<'_, T, K>,
     i: usize,
     js: &[u32],
 ) -> T::Out {
     // SAFETY: the caller's contract.
-    unsafe { pass.drive::<Avx512>(i, js) }
+    unsafe { pass.drive::<Avx512, FIELDS>(i, js) }
 }
 
-/// The pass's sum for particle `i` with AVX2 lanes.
+/// The pass's sum for particle `i` with AVX2 lanes (`FIELDS`: see `Pass::drive`).
 ///
 /// # Safety
 /// The processor has AVX2.
 #[target_feature(enable = "avx2")]
-pub(super) unsafe fn sum_avx2<T: PairTerm, K: Kernel>(
+pub(super) unsafe fn sum_avx2<T: PairTerm, K: Kernel, const FIELDS: u16>(
     pass: &Pass<'_, T, K>,
     i: usize,
     js: &[u32],
 ) -> T::Out {
     // SAFETY: the caller's contract.
-    unsafe { pass.drive::<Avx2>(i, js) }
+    unsafe { pass.drive::<Avx2, FIELDS>(i, js) }
 }
 
 /// The element-wise operators of a lane type through its `each`.
