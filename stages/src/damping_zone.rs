@@ -37,21 +37,20 @@ fn ten() -> f64 {
 }
 
 pub fn register(registry: &mut StageRegistry) {
-    registry.register(
+    registry.register_checked(
         "damping_zone",
         "wave absorber: velocities relax to rest in a zone (after Integrate)",
         |p: Params| {
-            if !(p.from.is_finite() && p.to.is_finite() && p.to > p.from) {
-                return Err(format!(
-                    "fields `from` = {} and `to` = {}: accepted finite positions with to > from",
-                    p.from, p.to
-                ));
+            let out = sph_core::ParamError::new;
+            if !p.from.is_finite() {
+                return Err(out("from", p.from, "a finite position [m]"));
+            }
+            if !(p.to.is_finite() && p.to > p.from) {
+                let accepted = format!("a finite position beyond `from` = {} [m]", p.from);
+                return Err(out("to", p.to, accepted.as_str()));
             }
             if !(p.strength >= 0.0 && p.strength.is_finite()) {
-                return Err(format!(
-                    "field `strength` = {} is out of range; accepted: a rate >= 0 [1/s]",
-                    p.strength
-                ));
+                return Err(out("strength", p.strength, "a rate >= 0 [1/s]"));
             }
             Ok(DampingZone { params: p })
         },

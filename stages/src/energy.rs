@@ -37,14 +37,15 @@ impl Default for Params {
 }
 
 pub fn register(registry: &mut StageRegistry) {
-    registry.register(
+    registry.register_checked(
         "energy",
         "kinetic, potential, internal and viscous energy to energy.csv",
         |p: Params| {
             if !(p.interval >= 0.0 && p.interval.is_finite()) {
-                return Err(format!(
-                    "field `interval` = {} is out of range; accepted: seconds >= 0",
-                    p.interval
+                return Err(sph_core::ParamError::new(
+                    "interval",
+                    p.interval,
+                    "seconds >= 0",
                 ));
             }
             Ok(Energy {
@@ -109,7 +110,7 @@ impl Stage for Energy {
         Ok(e.into_bytes())
     }
 
-    fn load_state(&mut self, _sim: &mut Sim, state: &[u8]) -> Result<(), String> {
+    fn load_state(&mut self, _sim: &mut Sim, state: &[u8]) -> Result<(), sph_core::StateError> {
         let mut d = Dec::new(state);
         self.viscous = d.f64()?;
         self.next = d.f64()?;

@@ -139,6 +139,7 @@ impl Stage for GhostWalls {
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
         self.walls.at(sim.clock.time);
         self.find_images(sim)?;
+        let _span = tracing::info_span!("mirror").entered();
         if let Some(s) = sim.resources.get_mut::<GhostSettings>() {
             s.poses.clear();
             s.poses.extend(self.walls.now().iter().map(|w| w.body));
@@ -201,6 +202,7 @@ impl GhostWalls {
     /// Fills `images` with the ghosts this step needs, in a fixed order (by source,
     /// then wall), reusing the per-chunk buffers from step to step.
     fn find_images(&mut self, sim: &Sim) -> Result<(), StepError> {
+        let _span = tracing::info_span!("find_images").entered();
         self.images.clear();
         let Some(fluid) = archetype::<Fluid>(&sim.world) else {
             return Ok(());

@@ -70,39 +70,29 @@ impl Default for Params {
 }
 
 pub fn register(registry: &mut StageRegistry) {
-    registry.register(
+    registry.register_checked(
         "integrate",
         "leapfrog time step with adaptive dt and stability checks",
         |p: Params| {
+            let out = sph_core::ParamError::new;
             if !(p.courant > 0.0 && p.courant <= 1.0) {
-                return Err(format!(
-                    "field `courant` = {} is out of range; accepted: 0 < C <= 1 (0.2-0.3 usual)",
-                    p.courant
-                ));
+                return Err(out("courant", p.courant, "0 < C <= 1 (0.2-0.3 usual)"));
             }
             if !(p.max_dt > 0.0 && p.max_dt.is_finite()) {
-                return Err(format!(
-                    "field `max_dt` = {} is out of range; accepted: a number > 0",
-                    p.max_dt
-                ));
+                return Err(out("max_dt", p.max_dt, "a number > 0"));
             }
             if !(p.collapse_fraction > 0.0 && p.collapse_fraction < 1.0) {
-                return Err(format!(
-                    "field `collapse_fraction` = {} is out of range; accepted: 0 to 1",
-                    p.collapse_fraction
-                ));
+                return Err(out("collapse_fraction", p.collapse_fraction, "0 to 1"));
             }
             if p.density_limit.is_nan() || p.density_limit <= 0.0 {
-                return Err(format!(
-                    "field `density_limit` = {} is out of range; accepted: a number > 0",
-                    p.density_limit
-                ));
+                return Err(out("density_limit", p.density_limit, "a number > 0"));
             }
             if let Some(f) = p.density_floor {
                 if !(f > 0.0 && f <= 1.0) {
-                    return Err(format!(
-                        "field `density_floor` = {f} is out of range; accepted: a fraction of \
-                         rho_0 with 0 < f <= 1 (below 1 with Eos(min_pressure: 0), e.g. 0.9)"
+                    return Err(out(
+                        "density_floor",
+                        f,
+                        "a fraction of rho_0 with 0 < f <= 1 (below 1 with Eos(min_pressure: 0), e.g. 0.9)",
                     ));
                 }
             }
@@ -159,7 +149,7 @@ impl Stage for Integrate {
         Ok(e.into_bytes())
     }
 
-    fn load_state(&mut self, sim: &mut Sim, state: &[u8]) -> Result<(), String> {
+    fn load_state(&mut self, sim: &mut Sim, state: &[u8]) -> Result<(), sph_core::StateError> {
         let mut d = Dec::new(state);
         self.first_dt = d.opt_f64()?;
         let fluid = archetype::<Fluid>(&sim.world);
@@ -192,7 +182,7 @@ impl Stage for Integrate {
         let mut vh = column_mut::<HalfVelocity>(fluid)?;
         let mut rh = column_mut::<HalfDensity>(fluid)?;
 
-        let ext = Extremes::of(&v, acc, rate, &rho);
+        let ext = tracing::info_span!("time_step").in_scope(|| Extremes::of(&v, acc, rate, &rho));
         if !ext.finite {
             let bad = |i: &usize| !(acc[*i].0.is_finite() && rate[*i].0.is_finite());
             let i = (0..acc.len()).find(bad).unwrap_or(0);
@@ -245,6 +235,7 @@ impl Stage for Integrate {
         let (rho0, limit) = (c.eos.rho0, self.params.density_limit);
         let reach = c.support();
         let least = self.params.density_floor.map(|f| f * rho0);
+        let _span = tracing::info_span!("advance").entered();
         // One pass: kick, drift, reflect at the walls (at their end-of-step place),
         // raise densities to the floor, then check; it returns the reflections, the
         // floored particles and the lowest offending index.

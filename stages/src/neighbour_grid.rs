@@ -138,6 +138,7 @@ impl CellGrid {
     /// Rebuilds the grid for `positions` (joint numbering) by a counting sort, so each
     /// cell lists its particles in ascending index order. Reuses its buffers.
     fn rebuild(&mut self, positions: Joined<Position>) {
+        let _span = tracing::info_span!("grid_build").entered();
         let n = positions.len();
         let mut cells = std::mem::take(&mut self.cells);
         resize_by_eighths(&mut cells, n, 0);
@@ -292,7 +293,7 @@ impl Stage for NeighbourGrid {
         Ok(e.into_bytes())
     }
 
-    fn load_state(&mut self, _sim: &mut Sim, state: &[u8]) -> Result<(), String> {
+    fn load_state(&mut self, _sim: &mut Sim, state: &[u8]) -> Result<(), sph_core::StateError> {
         let mut d = Dec::new(state);
         self.calls = d.u64()?;
         d.end()
@@ -314,6 +315,7 @@ impl NeighbourGrid {
         let pad = DVec2::splat(support);
         nb.grid.shape((lo - pad, hi + pad), support / REACH as f64);
         if self.sort_every > 0 && self.calls.is_multiple_of(self.sort_every as u64) {
+            let _span = tracing::info_span!("sort").entered();
             let kinds = sim
                 .resources
                 .get::<ColumnKinds>()
@@ -369,12 +371,15 @@ impl NeighbourGrid {
         nb.blocks
             .resize_with(n.div_ceil(BLOCK), NeighbourBlock::default);
         let scan = Scan::detect();
-        nb.blocks.par_iter_mut().enumerate().for_each(|(b, block)| {
-            let range = b * BLOCK..((b + 1) * BLOCK).min(n);
-            scan.build_block(grid, fpos, r2max, range, block);
+        tracing::info_span!("scan").in_scope(|| {
+            nb.blocks.par_iter_mut().enumerate().for_each(|(b, block)| {
+                let range = b * BLOCK..((b + 1) * BLOCK).min(n);
+                scan.build_block(grid, fpos, r2max, range, block);
+            })
         });
         nb.blocks.truncate(n.div_ceil(BLOCK));
         if self.count {
+            let _span = tracing::info_span!("count").entered();
             let mut counts = column_mut::<NeighbourCount>(fluid)?;
             counts
                 .par_chunks_mut(BLOCK)

@@ -112,14 +112,15 @@ impl Default for Params {
 }
 
 pub fn register(registry: &mut StageRegistry) {
-    registry.register(
+    registry.register_checked(
         "probe",
         "pressure sensors, wave gauges, front, column height, statistics",
         |p: Params| {
             if !(p.interval >= 0.0 && p.interval.is_finite()) {
-                return Err(format!(
-                    "field `interval` = {} is out of range; accepted: seconds >= 0",
-                    p.interval
+                return Err(sph_core::ParamError::new(
+                    "interval",
+                    p.interval,
+                    "seconds >= 0",
                 ));
             }
             Ok(Probe {
@@ -209,7 +210,7 @@ impl Stage for Probe {
         Ok(e.into_bytes())
     }
 
-    fn load_state(&mut self, _sim: &mut Sim, state: &[u8]) -> Result<(), String> {
+    fn load_state(&mut self, _sim: &mut Sim, state: &[u8]) -> Result<(), sph_core::StateError> {
         let mut d = Dec::new(state);
         self.next = d.f64()?;
         d.end()
@@ -371,6 +372,7 @@ impl Probe {
     }
 
     fn sample(&self, sim: &Sim) -> Result<Vec<f64>, StepError> {
+        let _span = tracing::info_span!("sample").entered();
         let Some(particles) = Particles::of(&sim.world) else {
             return Ok(vec![0.0; self.columns().len()]);
         };

@@ -39,23 +39,23 @@ impl Default for Params {
 }
 
 pub fn register(registry: &mut StageRegistry) {
-    registry.register(
+    registry.register_checked(
         "snapshots",
         "PNG pictures of the particles coloured by pressure",
         |mut p: Params| {
-            if p.times.iter().any(|t| !t.is_finite() || *t < 0.0) {
-                return Err("field `times`: accepted: times in seconds >= 0".into());
+            use sph_core::ParamError;
+            if let Some(t) = p.times.iter().find(|t| !t.is_finite() || **t < 0.0) {
+                return Err(ParamError::new("times", t, "times in seconds >= 0"));
             }
             if !(100..=8000).contains(&p.width) {
-                return Err(format!(
-                    "field `width` = {} is out of range; accepted: 100 to 8000 pixels",
-                    p.width
-                ));
+                return Err(ParamError::new("width", p.width, "100 to 8000 pixels"));
             }
             if let Some(((x0, y0), (x1, y1))) = p.region {
                 if !(x1 > x0 && y1 > y0 && [x0, y0, x1, y1].iter().all(|v| v.is_finite())) {
-                    return Err(format!(
-                        "field `region` = (({x0}, {y0}), ({x1}, {y1})); accepted: ((x0, y0), (x1, y1)) with x1 > x0, y1 > y0 [m]"
+                    return Err(ParamError::new(
+                        "region",
+                        format!("(({x0}, {y0}), ({x1}, {y1}))"),
+                        "((x0, y0), (x1, y1)) with x1 > x0, y1 > y0 [m]",
                     ));
                 }
             }
@@ -85,7 +85,7 @@ impl Stage for Snapshots {
         Ok(e.into_bytes())
     }
 
-    fn load_state(&mut self, _sim: &mut Sim, state: &[u8]) -> Result<(), String> {
+    fn load_state(&mut self, _sim: &mut Sim, state: &[u8]) -> Result<(), sph_core::StateError> {
         let mut d = Dec::new(state);
         self.taken = d.u64()? as usize;
         d.end()
@@ -106,6 +106,7 @@ impl Stage for Snapshots {
         {
             self.taken += 1;
         }
+        let _span = tracing::info_span!("write_png").entered();
         let Some(particles) = Particles::of(&sim.world) else {
             return Ok(());
         };

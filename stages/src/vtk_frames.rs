@@ -30,14 +30,15 @@ impl Default for Params {
 }
 
 pub fn register(registry: &mut StageRegistry) {
-    registry.register(
+    registry.register_checked(
         "vtk_frames",
         "ParaView particle frames (.vtp + frames.pvd)",
         |p: Params| {
             if !(p.interval > 0.0 && p.interval.is_finite()) {
-                return Err(format!(
-                    "field `interval` = {} is out of range; accepted: seconds > 0",
-                    p.interval
+                return Err(sph_core::ParamError::new(
+                    "interval",
+                    p.interval,
+                    "seconds > 0",
                 ));
             }
             Ok(VtkFrames {
@@ -104,7 +105,7 @@ impl Stage for VtkFrames {
         Ok(e.into_bytes())
     }
 
-    fn load_state(&mut self, _sim: &mut Sim, state: &[u8]) -> Result<(), String> {
+    fn load_state(&mut self, _sim: &mut Sim, state: &[u8]) -> Result<(), sph_core::StateError> {
         let mut d = Dec::new(state);
         self.next = d.f64()?;
         self.written = d.u64()? as usize;
@@ -116,10 +117,13 @@ impl Stage for VtkFrames {
             let n = d.len(16)?;
             let entries = (0..n)
                 .map(|_| Ok((d.f64()?, d.str()?)))
-                .collect::<Result<Vec<_>, String>>()?;
+                .collect::<Result<Vec<_>, sph_core::StateError>>()?;
             index
                 .restore(entries)
-                .map_err(|e| format!("{}: {e}", index.path().display()))?;
+                .map_err(|e| sph_core::StateError::Output {
+                    path: index.path().display().to_string(),
+                    message: e.to_string(),
+                })?;
         }
         d.end()
     }
@@ -133,6 +137,7 @@ impl Stage for VtkFrames {
                 .floor()
                 .max(0.0)
             + self.params.interval;
+        let _span = tracing::info_span!("write_frame").entered();
         let name = format!("frames/frame_{:05}.vtp", self.written);
         write_fluid_frame(sim, &sim.out_dir.join(&name))?;
         if let Some(index) = &mut self.index {

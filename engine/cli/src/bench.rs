@@ -296,7 +296,11 @@ pub fn run_case(
     if scenario.spec.pipeline.last().map(|e| e.name.as_str()) != Some("bench_stop") {
         return Err("BenchStop did not land at the end of the pipeline".into());
     }
-    let opts = RunOptions::quiet(out, case.threads);
+    // Profiled for the per-stage shares.
+    let opts = RunOptions {
+        profile: true,
+        ..RunOptions::quiet(out, case.threads)
+    };
     let (summary, sim) = run_keeping_state(scenario, &opts).map_err(|e| e.to_string())?;
     let end_bytes = proc_status("VmRSS:");
     let heap_peak = heap_bytes().1;

@@ -85,10 +85,10 @@ pub struct RunArgs {
     /// Worker threads [default: one per core].
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Print the per-stage time table at the end.
+    /// Print the per-stage time table at the end (stages and their inner spans).
     #[arg(long)]
     pub profile: bool,
-    /// Write a Chrome/Perfetto trace of the stage spans to FILE.
+    /// Write a Chrome/Perfetto trace of the step, stage and inner spans to FILE.
     #[arg(long, value_name = "FILE")]
     pub trace: Option<PathBuf>,
     /// No progress bar.
@@ -186,6 +186,7 @@ pub fn resume(args: &ResumeArgs, registry: &StageRegistry) -> Result<ExitCode, S
         out_dir: args.dir.clone(),
         threads: args.threads,
         progress: !args.quiet,
+        profile: args.profile,
         checkpoint_every: args.checkpoints.checkpoint_every,
         stop_at: args.checkpoints.stop_at,
         resume: Some(checkpoint),
@@ -193,7 +194,7 @@ pub fn resume(args: &ResumeArgs, registry: &StageRegistry) -> Result<ExitCode, S
         origin,
         ..RunOptions::default()
     };
-    execute(scenario, &opts, args.profile)
+    execute(scenario, &opts)
 }
 
 /// Loads and runs one scenario, printing the headline figures.
@@ -222,6 +223,7 @@ pub fn run_scenario(args: &RunArgs, registry: &StageRegistry) -> Result<ExitCode
         out_dir,
         threads: args.threads,
         progress: !args.quiet,
+        profile: args.profile,
         trace: args.trace.clone(),
         checkpoint_every: args.checkpoints.checkpoint_every,
         stop_at: args.checkpoints.stop_at,
@@ -232,12 +234,12 @@ pub fn run_scenario(args: &RunArgs, registry: &StageRegistry) -> Result<ExitCode
         },
         ..RunOptions::default()
     };
-    execute(scenario, &opts, args.profile)
+    execute(scenario, &opts)
 }
 
 /// Runs a loaded scenario and prints the headline figures; the exit code is
 /// [`INTERRUPTED`] after a Ctrl-C (with its checkpoint written).
-fn execute(scenario: Scenario, opts: &RunOptions, profile: bool) -> Result<ExitCode, String> {
+fn execute(scenario: Scenario, opts: &RunOptions) -> Result<ExitCode, String> {
     let out_dir = &opts.out_dir;
     let waves = sph_core::waves::WaveTheory::from_scenario(&scenario);
     let result = run(scenario, opts);
@@ -246,7 +248,7 @@ fn execute(scenario: Scenario, opts: &RunOptions, profile: bool) -> Result<ExitC
         Err(RunError::Step { summary, .. }) => (**summary).clone(),
         Err(e) => return Err(e.to_string()),
     };
-    if profile {
+    if opts.profile {
         println!("{}", summary.profile_table());
     }
     println!(

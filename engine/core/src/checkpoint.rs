@@ -34,6 +34,41 @@ pub const PREVIOUS: &str = "checkpoint.prev.bin";
 /// The temporary name a checkpoint is written under before the rename.
 pub const TEMPORARY: &str = "checkpoint.bin.tmp";
 
+/// Why a checkpoint, or a stage's part of one, cannot be read back.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum StateError {
+    #[error("not a checkpoint file (bad magic number or truncated)")]
+    NotCheckpoint,
+    #[error("checksum mismatch: the file is truncated or damaged")]
+    Checksum,
+    #[error(
+        "checkpoint format version {found}; this engine reads version {}",
+        VERSION
+    )]
+    Version { found: u32 },
+    #[error("checkpoint data ends early")]
+    Truncated,
+    /// A count that asks for more bytes than are left (a damaged count).
+    #[error("checkpoint data is inconsistent (a count of {count} with {left} bytes left)")]
+    Count { count: u64, left: u64 },
+    #[error("checkpoint data has {0} unread bytes")]
+    Unread(usize),
+    #[error("checkpoint text is not UTF-8: {0}")]
+    Text(#[from] std::string::FromUtf8Error),
+    /// The checkpoint does not fit the scenario: other stages, particles or columns.
+    #[error("{0}")]
+    Mismatch(String),
+    /// A stage could not put back a file it keeps (e.g. a `.pvd` index).
+    #[error("{path}: {message}")]
+    Output { path: String, message: String },
+    /// A stage's state failed to load.
+    #[error("stage `{stage}`: {error}")]
+    Stage {
+        stage: String,
+        error: Box<StateError>,
+    },
+}
+
 /// Where a run came from, so `engine resume` can load the same scenario again.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Origin {
@@ -130,21 +165,19 @@ pub fn seal(mut e: Enc) -> Vec<u8> {
 
 /// Decodes a checkpoint file, checking its magic, version and checksum. The payload
 /// keeps the file's buffer (no copy).
-pub fn decode(mut bytes: Vec<u8>, file: &Path) -> Result<Checkpoint, String> {
+pub fn decode(mut bytes: Vec<u8>, file: &Path) -> Result<Checkpoint, StateError> {
     if bytes.len() < MAGIC.len() + 8 || &bytes[..MAGIC.len()] != MAGIC {
-        return Err("not a checkpoint file (bad magic number or truncated)".into());
+        return Err(StateError::NotCheckpoint);
     }
     let (body, sum) = bytes.split_at(bytes.len() - 8);
     let stored = u64::from_le_bytes(sum.try_into().unwrap_or_default());
     if fnv1a(body) != stored {
-        return Err("checksum mismatch: the file is truncated or damaged".into());
+        return Err(StateError::Checksum);
     }
     let mut d = Dec::new(&body[MAGIC.len()..]);
     let version = d.u32()?;
     if version != VERSION {
-        return Err(format!(
-            "checkpoint format version {version}; this engine reads version {VERSION}"
-        ));
+        return Err(StateError::Version { found: version });
     }
     let (step, time, fingerprint) = (d.u64()?, d.f64()?, d.u64()?);
     let scenario = PathBuf::from(d.str()?);
@@ -300,67 +333,62 @@ impl<'a> Dec<'a> {
     pub fn new(buf: &'a [u8]) -> Self {
         Self { buf, pos: 0 }
     }
-    fn take(&mut self, n: usize) -> Result<&'a [u8], String> {
+    fn take(&mut self, n: usize) -> Result<&'a [u8], StateError> {
         let end = self.pos.checked_add(n).filter(|&e| e <= self.buf.len());
-        let end = end.ok_or("checkpoint data ends early")?;
+        let end = end.ok_or(StateError::Truncated)?;
         let out = &self.buf[self.pos..end];
         self.pos = end;
         Ok(out)
     }
-    fn array<const N: usize>(&mut self) -> Result<[u8; N], String> {
+    fn array<const N: usize>(&mut self) -> Result<[u8; N], StateError> {
         let mut a = [0; N];
         a.copy_from_slice(self.take(N)?);
         Ok(a)
     }
-    pub fn u32(&mut self) -> Result<u32, String> {
+    pub fn u32(&mut self) -> Result<u32, StateError> {
         Ok(u32::from_le_bytes(self.array()?))
     }
-    pub fn u64(&mut self) -> Result<u64, String> {
+    pub fn u64(&mut self) -> Result<u64, StateError> {
         Ok(u64::from_le_bytes(self.array()?))
     }
-    pub fn f64(&mut self) -> Result<f64, String> {
+    pub fn f64(&mut self) -> Result<f64, StateError> {
         Ok(f64::from_le_bytes(self.array()?))
     }
-    pub fn bool(&mut self) -> Result<bool, String> {
+    pub fn bool(&mut self) -> Result<bool, StateError> {
         Ok(self.take(1)?[0] != 0)
     }
-    pub fn opt_f64(&mut self) -> Result<Option<f64>, String> {
+    pub fn opt_f64(&mut self) -> Result<Option<f64>, StateError> {
         let some = self.bool()?;
         let v = self.f64()?;
         Ok(some.then_some(v))
     }
     /// A count of items at least `min_bytes` each, checked against the bytes left so
     /// a damaged count cannot ask for an absurd allocation.
-    pub fn len(&mut self, min_bytes: usize) -> Result<usize, String> {
+    pub fn len(&mut self, min_bytes: usize) -> Result<usize, StateError> {
         let n = self.u64()?;
         let left = (self.buf.len() - self.pos) as u64;
         if n.saturating_mul(min_bytes.max(1) as u64) > left {
-            return Err(format!(
-                "checkpoint data is inconsistent (a count of {n} with {left} bytes left)"
-            ));
+            return Err(StateError::Count { count: n, left });
         }
         Ok(n as usize)
     }
-    pub fn bytes(&mut self) -> Result<&'a [u8], String> {
+    pub fn bytes(&mut self) -> Result<&'a [u8], StateError> {
         let n = self.len(1)?;
         self.take(n)
     }
-    pub fn str(&mut self) -> Result<String, String> {
-        String::from_utf8(self.bytes()?.to_vec()).map_err(|e| e.to_string())
+    pub fn str(&mut self) -> Result<String, StateError> {
+        Ok(String::from_utf8(self.bytes()?.to_vec())?)
     }
     /// A value of a [`Field`] type.
-    pub fn get<T: Field>(&mut self) -> Result<T, String> {
+    pub fn get<T: Field>(&mut self) -> Result<T, StateError> {
         T::get(self)
     }
     /// Fails unless every byte was read.
-    pub fn end(&self) -> Result<(), String> {
+    pub fn end(&self) -> Result<(), StateError> {
         if self.pos == self.buf.len() {
             Ok(())
         } else {
-            Err(format!(
-                "checkpoint data has {} unread bytes",
-                self.buf.len() - self.pos
-            ))
+            Err(StateError::Unread(self.buf.len() - self.pos))
         }
     }
 }
@@ -370,7 +398,7 @@ pub trait Field: Sized {
     /// Bytes per value in the encoding (for length checks).
     const BYTES: usize;
     fn put(&self, e: &mut Enc);
-    fn get(d: &mut Dec) -> Result<Self, String>;
+    fn get(d: &mut Dec) -> Result<Self, StateError>;
 }
 
 impl Field for f64 {
@@ -378,7 +406,7 @@ impl Field for f64 {
     fn put(&self, e: &mut Enc) {
         e.f64(*self);
     }
-    fn get(d: &mut Dec) -> Result<Self, String> {
+    fn get(d: &mut Dec) -> Result<Self, StateError> {
         d.f64()
     }
 }
@@ -388,7 +416,7 @@ impl Field for u32 {
     fn put(&self, e: &mut Enc) {
         e.u32(*self);
     }
-    fn get(d: &mut Dec) -> Result<Self, String> {
+    fn get(d: &mut Dec) -> Result<Self, StateError> {
         d.u32()
     }
 }
@@ -399,7 +427,7 @@ impl Field for DVec2 {
         e.f64(self.x);
         e.f64(self.y);
     }
-    fn get(d: &mut Dec) -> Result<Self, String> {
+    fn get(d: &mut Dec) -> Result<Self, StateError> {
         Ok(DVec2::new(d.f64()?, d.f64()?))
     }
 }
@@ -413,7 +441,9 @@ macro_rules! checkpoint_newtype {
             fn put(&self, e: &mut $crate::checkpoint::Enc) {
                 e.put(&self.0);
             }
-            fn get(d: &mut $crate::checkpoint::Dec) -> Result<Self, String> {
+            fn get(
+                d: &mut $crate::checkpoint::Dec,
+            ) -> Result<Self, $crate::checkpoint::StateError> {
                 Ok($name(d.get()?))
             }
         }
@@ -437,7 +467,7 @@ impl Field for Ghost {
     fn put(&self, e: &mut Enc) {
         e.u32(self.source);
     }
-    fn get(d: &mut Dec) -> Result<Self, String> {
+    fn get(d: &mut Dec) -> Result<Self, StateError> {
         Ok(Ghost { source: d.u32()? })
     }
 }
@@ -461,7 +491,7 @@ pub fn put_column<T: Component + Field>(e: &mut Enc, arch: Option<&Archetype>) {
 pub fn get_column<T: Component + Field>(
     d: &mut Dec,
     arch: Option<&Archetype>,
-) -> Result<(), String> {
+) -> Result<(), StateError> {
     let short = short_name::<T>();
     let stored = d.bool()?;
     let col = arch.and_then(|a| a.get::<&mut T>());
@@ -470,27 +500,27 @@ pub fn get_column<T: Component + Field>(
         (true, Some(mut col)) => {
             let n = d.len(T::BYTES)?;
             if n != col.len() {
-                return Err(format!(
+                return Err(StateError::Mismatch(format!(
                     "the checkpoint has {n} values of `{short}`, the scenario builds {}",
                     col.len()
-                ));
+                )));
             }
             for v in col.iter_mut() {
                 *v = d.get()?;
             }
             Ok(())
         }
-        (true, None) => Err(format!(
+        (true, None) => Err(StateError::Mismatch(format!(
             "the checkpoint has a `{short}` column the scenario's particles lack (was the pipeline changed?)"
-        )),
-        (false, Some(_)) => Err(format!(
+        ))),
+        (false, Some(_)) => Err(StateError::Mismatch(format!(
             "the scenario's particles have a `{short}` column the checkpoint lacks (was the pipeline changed?)"
-        )),
+        ))),
     }
 }
 
 /// Reads a whole column written by [`put_column`] as values.
-fn read_values<T: Field>(d: &mut Dec) -> Result<Option<Vec<T>>, String> {
+fn read_values<T: Field>(d: &mut Dec) -> Result<Option<Vec<T>>, StateError> {
     if !d.bool()? {
         return Ok(None);
     }
@@ -526,7 +556,7 @@ pub fn put_particles(e: &mut Enc, world: &World) {
 
 /// Restores what [`put_particles`] wrote into a world built from the same scenario
 /// (the stages set up): the fluid columns in place, the ghosts spawned afresh.
-pub fn get_particles(d: &mut Dec, world: &mut World) -> Result<(), String> {
+pub fn get_particles(d: &mut Dec, world: &mut World) -> Result<(), StateError> {
     let fluid = archetype::<Fluid>(world);
     get_column::<ParticleId>(d, fluid)?;
     get_column::<Position>(d, fluid)?;
@@ -542,9 +572,9 @@ pub fn get_particles(d: &mut Dec, world: &mut World) -> Result<(), String> {
     let column = |what: &str, got: Option<usize>| match got {
         Some(m) if m == n => Ok(()),
         None if n == 0 => Ok(()),
-        _ => Err(format!(
+        _ => Err(StateError::Mismatch(format!(
             "the checkpoint's ghost `{what}` column does not match its ghosts"
-        )),
+        ))),
     };
     let x = read_values::<Position>(d)?;
     column("Position", x.as_ref().map(Vec::len))?;
@@ -600,7 +630,7 @@ mod tests {
         }
         let mut flipped = bytes.clone();
         flipped[30] ^= 1;
-        assert!(decode(flipped, Path::new("c")).is_err());
+        assert_eq!(decode(flipped, Path::new("c")), Err(StateError::Checksum));
     }
 
     #[test]
@@ -608,6 +638,17 @@ mod tests {
         let mut e = Enc::default();
         e.u64(u64::MAX);
         let bytes = e.into_bytes();
-        assert!(Dec::new(&bytes).bytes().is_err());
+        let err = Dec::new(&bytes).bytes().unwrap_err();
+        assert_eq!(
+            err,
+            StateError::Count {
+                count: u64::MAX,
+                left: 0
+            }
+        );
+        assert_eq!(Dec::new(&bytes[..3]).u64(), Err(StateError::Truncated));
+        let mut d = Dec::new(&bytes);
+        d.u32().unwrap();
+        assert_eq!(d.end(), Err(StateError::Unread(4)));
     }
 }

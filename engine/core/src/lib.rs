@@ -1,5 +1,5 @@
 //! Core of the WCSPH engine: the particle world and its components, the stage trait and
-//! registry, the scenario loader, the runner with its profiling, and the output writers.
+//! registry, the scenario loader, the runner with its profiler, and the output writers.
 //! The standard stages live in the `sph-stages` crate; the `engine` binary joins them.
 
 pub mod checkpoint;
@@ -13,6 +13,7 @@ pub mod overrides;
 pub mod pair;
 pub mod parallel;
 pub mod piston;
+pub mod profile;
 pub mod registry;
 pub mod runner;
 pub mod scenario;
@@ -25,7 +26,7 @@ pub mod walls;
 pub mod waves;
 pub mod world;
 
-pub use registry::StageRegistry;
+pub use registry::{ParamError, StageRegistry};
 pub use scenario::{LoadError, Scenario};
 pub use sim::Sim;
-pub use stage::{SetupError, Stage, StepError};
+pub use stage::{SetupError, Stage, StateError, StepError};

@@ -23,6 +23,32 @@ struct Entry {
     summary: &'static str,
 }
 
+/// A stage parameter out of range: the field, the value given and what is accepted.
+/// Shown as "field `x` = v is out of range; accepted: ...", the form the scenario loader
+/// takes the field from.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("field `{field}` = {value} is out of range; accepted: {accepted}")]
+pub struct ParamError {
+    pub field: &'static str,
+    /// The value as written in messages.
+    pub value: String,
+    pub accepted: String,
+}
+
+impl ParamError {
+    pub fn new(
+        field: &'static str,
+        value: impl std::fmt::Display,
+        accepted: impl Into<String>,
+    ) -> Self {
+        Self {
+            field,
+            value: value.to_string(),
+            accepted: accepted.into(),
+        }
+    }
+}
+
 /// Maps snake_case stage names to constructors. Cloning is cheap (entries are shared).
 #[derive(Default, Clone)]
 pub struct StageRegistry {
@@ -44,7 +70,22 @@ impl StageRegistry {
     /// Registers stage `name` (snake_case; written `CamelCase(...)` in scenario files).
     /// `P` is the stage's parameter struct: give it `#[serde(default, deny_unknown_fields)]`
     /// so omitted fields take documented defaults and misspelt ones are refused.
-    /// `build` may reject out-of-range values with a message naming the field.
+    /// `build` may refuse out-of-range values with a [`ParamError`], which names the
+    /// field (the scenario loader points at it in the file).
+    pub fn register_checked<P, S>(
+        &mut self,
+        name: &str,
+        summary: &'static str,
+        build: impl Fn(P) -> Result<S, ParamError> + Send + Sync + 'static,
+    ) where
+        P: DeserializeOwned + Serialize + 'static,
+        S: Stage + 'static,
+    {
+        self.insert(name, summary, build);
+    }
+
+    /// As [`StageRegistry::register_checked`], with the refusal as text; write it
+    /// `field `x` = v ...` (as [`ParamError`] does) for the loader to find the field.
     pub fn register<P, S>(
         &mut self,
         name: &str,
@@ -53,6 +94,19 @@ impl StageRegistry {
     ) where
         P: DeserializeOwned + Serialize + 'static,
         S: Stage + 'static,
+    {
+        self.insert(name, summary, build);
+    }
+
+    fn insert<P, S, E>(
+        &mut self,
+        name: &str,
+        summary: &'static str,
+        build: impl Fn(P) -> Result<S, E> + Send + Sync + 'static,
+    ) where
+        P: DeserializeOwned + Serialize + 'static,
+        S: Stage + 'static,
+        E: std::fmt::Display,
     {
         let ctor: Constructor = Box::new(move |de| {
             let params: P = erased_serde::deserialize(de)?;

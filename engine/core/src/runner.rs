@@ -1,10 +1,12 @@
 //! The runner: sets the stages up, steps the pipeline to the end time inside `tracing`
-//! spans, times every stage, shows progress, and writes `summary.json` and the
-//! resolved scenario — also when the run stops early.
+//! spans, shows progress, and writes `summary.json` and the resolved scenario — also
+//! when the run stops early. A profiled run times the spans with
+//! [`crate::profile::ProfileLayer`]; a traced one writes them with `tracing-chrome`.
 
-use crate::checkpoint::{Checkpoint, Dec, Origin, Resuming};
+use crate::checkpoint::{Checkpoint, Dec, Origin, Resuming, StateError};
 use crate::components::{Fluid, Ghost};
 use crate::frame::write_fluid_frame;
+use crate::profile::{Profile, ProfileLayer, SpanTime};
 use crate::scenario::PipelineEntry;
 use crate::scenario::Scenario;
 use crate::sim::Sim;
@@ -25,7 +27,10 @@ pub struct RunOptions {
     pub threads: Option<usize>,
     /// Show a progress bar on a terminal.
     pub progress: bool,
-    /// Write a Chrome/Perfetto trace of the stage spans here.
+    /// Time the spans: `summary.json`'s `stages` and [`Summary::profile_table`]. Off,
+    /// no subscriber is installed and the spans cost next to nothing.
+    pub profile: bool,
+    /// Write a Chrome/Perfetto trace of the spans here.
     pub trace: Option<PathBuf>,
     /// Write a checkpoint about every this many seconds of simulated time.
     pub checkpoint_every: Option<f64>,
@@ -52,12 +57,15 @@ impl RunOptions {
     }
 }
 
-/// Time spent in one stage.
+/// Time spent in one stage (the busy time of its spans), with the spans it opened.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct StageTime {
     pub stage: String,
     pub calls: u64,
     pub seconds: f64,
+    /// The stage's inner spans (grid build, scan, file writes, ...), each with its own.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub inner: Vec<SpanTime>,
 }
 
 /// The contents of `summary.json`.
@@ -71,7 +79,11 @@ pub struct Summary {
     pub wall_seconds: f64,
     pub particle_steps_per_second: f64,
     pub threads: usize,
+    /// Per pipeline entry, when the run was profiled ([`RunOptions::profile`]); else
+    /// empty.
     pub stages: Vec<StageTime>,
+    /// The steps `stages` covers: this session's (a resumed run profiles its own).
+    pub profiled_steps: u64,
     /// Named counters from the stages, e.g. `wall_reflections`.
     pub diagnostics: std::collections::BTreeMap<String, f64>,
     /// `completed`, or why the run stopped.
@@ -79,29 +91,50 @@ pub struct Summary {
 }
 
 impl Summary {
-    /// The per-stage time table printed by `--profile`.
+    /// The per-stage time table printed by `--profile`: a row per stage, its inner
+    /// spans indented under it (their time is part of the stage's), and the total of
+    /// the stages.
     pub fn profile_table(&self) -> String {
         let total: f64 = self.stages.iter().map(|s| s.seconds).sum();
-        let particle_steps = (self.fluid_particles as f64 * self.steps as f64).max(1.0);
+        let particle_steps = (self.fluid_particles as f64 * self.profiled_steps as f64).max(1.0);
+        let row = |label: &str, calls: u64, seconds: f64| {
+            format!(
+                "{:<16} {:>8} {:>11.3} {:>11.4} {:>6.1}% {:>13.1}\n",
+                label,
+                calls,
+                seconds,
+                1e3 * seconds / calls.max(1) as f64,
+                100.0 * seconds / total.max(1e-300),
+                1e9 * seconds / particle_steps
+            )
+        };
+        fn inner(
+            out: &mut String,
+            rows: &[SpanTime],
+            depth: usize,
+            row: &dyn Fn(&str, u64, f64) -> String,
+        ) {
+            for s in rows {
+                *out += &row(
+                    &format!("{:depth$}{}", "", s.span, depth = 2 * depth),
+                    s.calls,
+                    s.seconds,
+                );
+                inner(out, &s.inner, depth + 1, row);
+            }
+        }
         let mut out = format!(
             "{:<16} {:>8} {:>11} {:>11} {:>7} {:>13}\n",
             "stage", "calls", "total [s]", "mean [ms]", "share", "ns/particle-step"
         );
         for s in &self.stages {
-            out += &format!(
-                "{:<16} {:>8} {:>11.3} {:>11.4} {:>6.1}% {:>13.1}\n",
-                s.stage,
-                s.calls,
-                s.seconds,
-                1e3 * s.seconds / s.calls.max(1) as f64,
-                100.0 * s.seconds / total.max(1e-300),
-                1e9 * s.seconds / particle_steps
-            );
+            out += &row(&s.stage, s.calls, s.seconds);
+            inner(&mut out, &s.inner, 1, &row);
         }
         out += &format!(
             "{:<16} {:>8} {:>11.3} {:>11} {:>7} {:>13.1}\n",
             "total",
-            self.steps,
+            self.profiled_steps,
             total,
             "",
             "",
@@ -126,6 +159,9 @@ pub enum RunError {
     },
     #[error("output {path}: {message}")]
     Output { path: String, message: String },
+    /// The checkpoint to resume from does not restore (damaged, or not this scenario's).
+    #[error("output {path}: {error}")]
+    Checkpoint { path: String, error: StateError },
     /// A run option out of range (`--checkpoint-every`, `--stop-at`).
     #[error("{0}")]
     Options(String),
@@ -150,29 +186,64 @@ pub fn run_keeping_state(
             path: "thread pool".into(),
             message: e.to_string(),
         })?;
-    if let Some(path) = &opts.trace {
-        // Fail before the run, with the path, rather than inside the trace writer.
-        std::fs::File::create(path).map_err(|e| RunError::Output {
+    // Opened here so a FILE that cannot be created fails before the run, with its path.
+    let trace_file = match &opts.trace {
+        Some(path) => Some(std::fs::File::create(path).map_err(|e| RunError::Output {
             path: path.display().to_string(),
             message: e.to_string(),
-        })?;
+        })?),
+        None => None,
+    };
+    if trace_file.is_none() && !opts.profile {
+        // No subscriber: every span is a disabled one.
+        return pool.install(|| run_in_pool(scenario, opts, None));
     }
-    // The subscriber is installed on the pool's thread, where the run happens.
-    pool.install(|| match &opts.trace {
-        Some(path) => {
-            use tracing_subscriber::prelude::*;
-            let (layer, _guard) = tracing_chrome::ChromeLayerBuilder::new()
-                .file(path)
+    use tracing_subscriber::prelude::*;
+    keep_interest_per_thread();
+    let (profile_layer, profile) = match opts.profile {
+        true => {
+            let (layer, profile) = ProfileLayer::new();
+            (Some(layer), Some(profile))
+        }
+        false => (None, None),
+    };
+    let (chrome_layer, _flush) = match trace_file {
+        Some(file) => {
+            let (layer, guard) = tracing_chrome::ChromeLayerBuilder::new()
+                .writer(std::io::BufWriter::new(file))
                 .include_args(true)
                 .build();
-            let subscriber = tracing_subscriber::registry().with(layer);
-            tracing::subscriber::with_default(subscriber, || run_in_pool(scenario, opts))
+            (Some(layer), Some(guard))
         }
-        None => run_in_pool(scenario, opts),
+        None => (None, None),
+    };
+    let subscriber = tracing_subscriber::registry()
+        .with(profile_layer)
+        .with(chrome_layer);
+    // Installed on the pool's thread that drives the run (only there: spans opened in
+    // other workers' tasks are not recorded, so stages open theirs on this thread).
+    pool.install(|| {
+        tracing::subscriber::with_default(subscriber, || {
+            run_in_pool(scenario, opts, profile.as_ref())
+        })
     })
 }
 
-fn run_in_pool(mut scenario: Scenario, opts: &RunOptions) -> Result<(Summary, Sim), RunError> {
+/// While exactly one dispatcher is registered, tracing-core caches a callsite's
+/// interest as seen from the thread that reaches it first (tokio-rs/tracing#3611): a
+/// run without a subscriber on another thread (a sweep's case, a test) would switch a
+/// span off for this run's subscriber too. With a second, inert dispatcher registered
+/// for the life of the process, the interest is taken from every registered one.
+fn keep_interest_per_thread() {
+    static INERT: std::sync::OnceLock<tracing::Dispatch> = std::sync::OnceLock::new();
+    INERT.get_or_init(|| tracing::Dispatch::new(tracing::subscriber::NoSubscriber::default()));
+}
+
+fn run_in_pool(
+    mut scenario: Scenario,
+    opts: &RunOptions,
+    profile: Option<&Profile>,
+) -> Result<(Summary, Sim), RunError> {
     let out = &opts.out_dir;
     let io_err = |e: std::io::Error| RunError::Output {
         path: out.display().to_string(),
@@ -186,9 +257,9 @@ fn run_in_pool(mut scenario: Scenario, opts: &RunOptions) -> Result<(Summary, Si
     let fingerprint = crate::checkpoint::fingerprint(&resolved);
     if let Some(c) = &opts.resume {
         if c.fingerprint != fingerprint {
-            return Err(RunError::Output {
+            return Err(RunError::Checkpoint {
                 path: c.file.display().to_string(),
-                message: "the checkpoint was written for another scenario (the scenario file, its overrides or the engine's defaults changed since); rerun from the start".into(),
+                error: StateError::Mismatch("the checkpoint was written for another scenario (the scenario file, its overrides or the engine's defaults changed since); rerun from the start".into()),
             });
         }
     }
@@ -208,22 +279,16 @@ fn run_in_pool(mut scenario: Scenario, opts: &RunOptions) -> Result<(Summary, Si
         scenario: sim.name.clone(),
         fluid_particles: count::<Fluid>(&sim.world),
         threads: rayon::current_num_threads(),
-        stages: pipeline
-            .iter()
-            .map(|e| StageTime {
-                stage: e.name.clone(),
-                ..StageTime::default()
-            })
-            .collect(),
         status: "running".into(),
         ..Summary::default()
     };
+    let labels = span_labels(&pipeline);
     let mut ghost_sum = 0.0;
     if let Some(c) = &opts.resume {
-        restore(c, &mut sim, &mut pipeline, &mut summary, &mut ghost_sum).map_err(|message| {
-            RunError::Output {
+        restore(c, &mut sim, &mut pipeline, &mut ghost_sum).map_err(|error| {
+            RunError::Checkpoint {
                 path: c.file.display().to_string(),
-                message,
+                error,
             }
         })?;
     }
@@ -242,31 +307,24 @@ fn run_in_pool(mut scenario: Scenario, opts: &RunOptions) -> Result<(Summary, Si
     let mut paused = None;
     'steps: while sim.clock.time < sim.clock.end_time * (1.0 - 1e-12) {
         let step = sim.clock.step;
-        let _span = tracing::info_span!("step", step).entered();
-        for (entry, time) in pipeline.iter_mut().zip(summary.stages.iter_mut()) {
+        // The step span holds the stage spans only (the profile's stage rows).
+        let step_span = tracing::info_span!("step", step).entered();
+        for (entry, label) in pipeline.iter_mut().zip(&labels) {
             if !step.is_multiple_of(entry.every as u64) {
                 continue;
             }
-            let t0 = Instant::now();
             let result = {
-                let _span = tracing::info_span!("stage", name = entry.name.as_str()).entered();
+                let _span = tracing::info_span!("stage", name = label.as_str()).entered();
                 entry.stage.run(&mut sim)
             };
-            time.calls += 1;
-            time.seconds += t0.elapsed().as_secs_f64();
             if let Err(error) = result {
                 failure = Some((entry.name.clone(), step, error));
                 break 'steps;
             }
         }
+        drop(step_span);
         if sim.clock.step == step {
-            failure = Some((
-                "runner".into(),
-                step,
-                StepError::Internal(
-                    "no stage advanced the clock: add Integrate() to the pipeline".into(),
-                ),
-            ));
+            failure = Some(("runner".into(), step, StepError::ClockStalled));
             break;
         }
         ghost_sum += count::<Ghost>(&sim.world) as f64;
@@ -293,8 +351,11 @@ fn run_in_pool(mut scenario: Scenario, opts: &RunOptions) -> Result<(Summary, Si
             continue;
         }
         summary.steps = sim.clock.step;
-        if let Err(error) = checkpoint(&sim, &mut pipeline, &summary, ghost_sum, fingerprint, opts)
-        {
+        let written = {
+            let _span = tracing::info_span!("checkpoint").entered();
+            checkpoint(&sim, &mut pipeline, ghost_sum, fingerprint, opts)
+        };
+        if let Err(error) = written {
             failure = Some(("checkpoint".into(), sim.clock.step, error));
             break;
         }
@@ -339,9 +400,14 @@ fn run_in_pool(mut scenario: Scenario, opts: &RunOptions) -> Result<(Summary, Si
     }
     let mut finish_error = None;
     for entry in &mut pipeline {
+        let _span = tracing::info_span!("finish", stage = entry.name.as_str()).entered();
         if let Err(e) = entry.stage.finish(&mut sim) {
             finish_error.get_or_insert((entry.name.clone(), e));
         }
+    }
+    if let Some(profile) = profile {
+        (summary.stages, summary.profiled_steps) =
+            stage_times(&profile.report(), &pipeline, &labels);
     }
     let json = serde_json::to_string_pretty(&summary).unwrap_or_default();
     crate::output::atomic::write_atomic(&out.join("summary.json"), json.as_bytes())
@@ -356,6 +422,47 @@ fn run_in_pool(mut scenario: Scenario, opts: &RunOptions) -> Result<(Summary, Si
         }),
         None => Ok((summary, sim)),
     }
+}
+
+/// The label of each pipeline entry's `stage` span: its name, numbered (`density#2`)
+/// when the pipeline has the stage more than once, so each entry gets its own row.
+fn span_labels(pipeline: &[PipelineEntry]) -> Vec<String> {
+    pipeline
+        .iter()
+        .enumerate()
+        .map(|(i, e)| {
+            let same = |o: &PipelineEntry| o.name == e.name;
+            if pipeline.iter().filter(|o| same(o)).count() == 1 {
+                return e.name.clone();
+            }
+            let k = pipeline[..i].iter().filter(|o| same(o)).count() + 1;
+            format!("{}#{k}", e.name)
+        })
+        .collect()
+}
+
+/// Each pipeline entry's row under the `step` spans (a stage never called has zero
+/// calls), and the number of steps.
+fn stage_times(
+    report: &[SpanTime],
+    pipeline: &[PipelineEntry],
+    labels: &[String],
+) -> (Vec<StageTime>, u64) {
+    let step = report.iter().find(|s| s.span == "step");
+    let stages = pipeline
+        .iter()
+        .zip(labels)
+        .map(|(entry, label)| {
+            let row = step.and_then(|s| s.child(label));
+            StageTime {
+                stage: entry.name.clone(),
+                calls: row.map_or(0, |r| r.calls),
+                seconds: row.map_or(0.0, |r| r.seconds),
+                inner: row.map(|r| r.inner.clone()).unwrap_or_default(),
+            }
+        })
+        .collect();
+    (stages, step.map_or(0, |s| s.calls))
 }
 
 /// Refuses checkpoint options that make no sense, before anything is written.
@@ -410,7 +517,6 @@ fn lcm(a: u64, b: u64) -> u64 {
 fn checkpoint(
     sim: &Sim,
     pipeline: &mut [PipelineEntry],
-    summary: &Summary,
     ghost_sum: f64,
     fingerprint: u64,
     opts: &RunOptions,
@@ -428,10 +534,12 @@ fn checkpoint(
     }
     crate::checkpoint::put_particles(&mut e, &sim.world);
     e.u64(pipeline.len() as u64);
-    for (entry, time) in pipeline.iter_mut().zip(&summary.stages) {
+    for entry in pipeline.iter_mut() {
         e.str(&entry.name);
-        e.u64(time.calls);
-        e.f64(time.seconds);
+        // Were the stage's calls and seconds; the profile covers one session, so
+        // these are written as zero and skipped on reading (the format is unchanged).
+        e.u64(0);
+        e.f64(0.0);
         e.bytes(&entry.stage.save_state(sim)?);
     }
     let bytes = crate::checkpoint::seal(e);
@@ -446,9 +554,8 @@ fn restore(
     c: &Checkpoint,
     sim: &mut Sim,
     pipeline: &mut [PipelineEntry],
-    summary: &mut Summary,
     ghost_sum: &mut f64,
-) -> Result<(), String> {
+) -> Result<(), StateError> {
     let mut d = Dec::new(&c.payload);
     sim.clock.time = d.f64()?;
     sim.clock.dt = d.f64()?;
@@ -463,26 +570,28 @@ fn restore(
     crate::checkpoint::get_particles(&mut d, &mut sim.world)?;
     let n = d.len(8)?;
     if n != pipeline.len() {
-        return Err(format!(
+        return Err(StateError::Mismatch(format!(
             "the checkpoint has {n} stages, the scenario's pipeline {}",
             pipeline.len()
-        ));
+        )));
     }
-    for (entry, time) in pipeline.iter_mut().zip(summary.stages.iter_mut()) {
+    for entry in pipeline.iter_mut() {
         let name = d.str()?;
         if name != entry.name {
-            return Err(format!(
+            return Err(StateError::Mismatch(format!(
                 "the checkpoint has stage `{name}` where the pipeline has `{}`",
                 entry.name
-            ));
+            )));
         }
-        time.calls = d.u64()?;
-        time.seconds = d.f64()?;
+        let (_calls, _seconds) = (d.u64()?, d.f64()?);
         let state = d.bytes()?;
         entry
             .stage
             .load_state(sim, state)
-            .map_err(|e| format!("stage `{name}`: {e}"))?;
+            .map_err(|error| StateError::Stage {
+                stage: name,
+                error: Box::new(error),
+            })?;
     }
     d.end()
 }

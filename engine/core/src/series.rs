@@ -113,6 +113,7 @@ impl SeriesWriter {
 
     /// Appends one row; values are written with full round-trip precision.
     pub fn push(&mut self, time: f64, values: Vec<f64>) -> Result<(), StepError> {
+        let _span = tracing::info_span!("write_row").entered();
         let mut line = format!("{time}");
         for v in &values {
             line.push(',');

@@ -3,6 +3,8 @@
 use crate::sim::Sim;
 use glam::DVec2;
 
+pub use crate::checkpoint::StateError;
+
 /// A pipeline stage. The runner calls [`Stage::setup`] once for every stage in
 /// pipeline order before the first step, then [`Stage::run`] for every stage in order
 /// each step (inside a `tracing` span named after the stage), then [`Stage::finish`].
@@ -34,7 +36,7 @@ pub trait Stage: Send {
 
     /// Restores what [`Stage::save_state`] wrote, after [`Stage::setup`] on a run that
     /// resumes from a checkpoint (the particles and the clock are already restored).
-    fn load_state(&mut self, _sim: &mut Sim, _state: &[u8]) -> Result<(), String> {
+    fn load_state(&mut self, _sim: &mut Sim, _state: &[u8]) -> Result<(), StateError> {
         Ok(())
     }
 }
@@ -70,6 +72,13 @@ pub enum StepError {
     /// Writing an output failed.
     #[error("output {path}: {message}")]
     Output { path: String, message: String },
+    /// The particles lack a component a stage reads: the stage that provides it is not
+    /// in the pipeline (or comes after).
+    #[error("particles have no `{0}` component: the stage that provides it is missing from the pipeline")]
+    MissingComponent(&'static str),
+    /// A step ended without any stage advancing the clock.
+    #[error("no stage advanced the clock: add Integrate() to the pipeline")]
+    ClockStalled,
     /// A bug or an inconsistent pipeline.
     #[error("{0}")]
     Internal(String),

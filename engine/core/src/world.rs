@@ -43,10 +43,7 @@ pub fn column_mut<'a, T: Component>(
 
 fn missing<T>() -> StepError {
     let full = std::any::type_name::<T>();
-    let short = full.rsplit("::").next().unwrap_or(full);
-    StepError::Internal(format!(
-        "particles have no `{short}` component: the stage that provides it is missing from the pipeline"
-    ))
+    StepError::MissingComponent(full.rsplit("::").next().unwrap_or(full))
 }
 
 /// Reorders column `T` of `arch` so that new entry k is old entry `order[k]` (a

@@ -70,7 +70,7 @@ use sph_core::series::SeriesWriter;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::world::Particles;
-use sph_core::StageRegistry;
+use sph_core::{ParamError, StageRegistry};
 
 /// The registered name: written `MaxSpeed(...)` in scenario files.
 pub const NAME: &str = "max_speed";
@@ -94,15 +94,12 @@ impl Default for Params {
 
 /// Registers `MaxSpeed` in `registry`.
 pub fn register(registry: &mut StageRegistry) {
-    registry.register(
+    registry.register_checked(
         NAME,
         "largest fluid speed to max_speed.csv and the summary's diagnostics",
         |p: Params| {
             if !(p.interval >= 0.0 && p.interval.is_finite()) {
-                return Err(format!(
-                    "field `interval` = {} is out of range; accepted: seconds >= 0",
-                    p.interval
-                ));
+                return Err(ParamError::new("interval", p.interval, "seconds >= 0"));
             }
             Ok(MaxSpeed {
                 params: p,
@@ -187,7 +184,7 @@ impl Stage for MaxSpeed {
         Ok(e.into_bytes())
     }
 
-    fn load_state(&mut self, _sim: &mut Sim, state: &[u8]) -> Result<(), String> {
+    fn load_state(&mut self, _sim: &mut Sim, state: &[u8]) -> Result<(), sph_core::StateError> {
         let mut d = Dec::new(state);
         self.next = d.f64()?;
         self.peak = d.f64()?;
