@@ -14,11 +14,10 @@ const QUIET: [&str; 4] = [
 /// Moyce's n^2 = 2) in the same 3.22 m tank, against the a = 2.25 in series, whose
 /// normalisation SOURCES.md states: T = t sqrt(2g/a), Z = z/a.
 ///
-/// The experiment's gate took time to open, so, as Lethe does and analytic.md
-/// section 2 allows, the simulation is delayed by Lethe's 0.175 (in T units) before
-/// comparing. Tolerance: analytic.md's suggested +-10 % for 1 <= T <= 3 (digitised data
-/// scatter ~1 % of full scale; early T is very sensitive to the gate). Without the
-/// delay the front leads the data by 15-20 %.
+/// The experiment's gate took time to open, so, as Lethe does, the simulation is
+/// delayed by Lethe's 0.175 (in T units) before comparing. Tolerance: +-10 % for
+/// 1 <= T <= 3 (digitised data scatter ~1 % of full scale; early T is very sensitive to
+/// the gate). Without the delay the front leads the data by 15-20 %.
 #[test]
 fn surge_front_follows_martin_and_moyce() {
     let mut overrides = vec![
@@ -61,20 +60,48 @@ fn surge_front_follows_martin_and_moyce() {
     }
 }
 
-/// P1 (right wall, y = 0.16 m) in the Zhou/Buchner tank at 5,000 particles: the first
-/// rise above p/(rho g H) = 0.1 must come at Buchner's t sqrt(g/H) ~ 2.49 (the three
-/// digitisations agree to ~1 %), within +-0.1 (4 %; the probe samples every 0.005 s,
-/// i.e. 0.02 in t*, and the arrival time depends on the thin tip's resolution).
+/// P1 on the right wall at y = 0.16 H = 0.096 m (Buchner's sensor; an earlier version put
+/// it at 0.16 m, where no weakly compressible run, this one included, reads the measured
+/// plateau) in the Zhou/Buchner tank at 5,000 particles, t* = t sqrt(g/H), p* = p/(rho g H).
+///
+/// First rise: above p* = 0.1 at Buchner's t* ~ 2.49 (the three digitisations agree to
+/// ~1 %), within +-0.1 (4 %; the probe samples every 0.005 s, i.e. 0.02 in t*, and the
+/// arrival time depends on the thin tip's resolution).
+///
+/// Plateau after the impact: the mean p* over t* 2.7-3.3 must lie within the range the
+/// measured P1 itself spans over that window (0.55-0.69 in the TrixiParticles
+/// digitisation). The reason: the record is one experiment, digitised to ~1 % of full
+/// scale, whose pressure moves by about +-0.07 about its mean there; a simulated mean
+/// inside that band is as close as the data resolve the plateau's level. Measured at
+/// 0.096 m: 0.57-0.58 for the three methods; at 0.16 m the same run reads 0.11, so the
+/// check tells the two heights apart. The spike before the plateau (p* ~ 5-6, a
+/// weakly compressible water hammer) is not compared (docs/validation.md).
 #[test]
-fn p1_first_rise_matches_buchner() {
-    let mut overrides = vec!["end_time=0.72"];
+fn p1_rise_and_plateau_match_buchner() {
+    // t* = 3.3 is t = 0.817 s.
+    let mut overrides = vec!["end_time=0.82"];
     overrides.extend(QUIET);
     let (_, _, out) = run_completed(load(SCENE, "scenarios/dam_break.ron", &overrides), "p1", 2);
     let (g, h): (f64, f64) = (9.81, 0.6);
     let (t_scale, p_scale) = ((g / h).sqrt(), 1000.0 * g * h);
     let rise = |points: &[(f64, f64)]| points.iter().find(|p| p.1 > 0.1).map(|p| p.0);
-    let measured = rise(&reference("buchner_2002_P1_pressure_trixi.csv")).expect("data rise");
+    let plateau = |points: &[(f64, f64)]| -> Vec<f64> {
+        points
+            .iter()
+            .filter(|p| (2.7..=3.3).contains(&p.0))
+            .map(|p| p.1)
+            .collect()
+    };
+    let data = reference("buchner_2002_P1_pressure_trixi.csv");
+    let measured = rise(&data).expect("data rise");
     assert!((measured - 2.49).abs() < 0.03, "reference rise {measured}");
+    let data_plateau = plateau(&data);
+    assert!(data_plateau.len() >= 5, "too few data points in t* 2.7-3.3");
+    let low = data_plateau.iter().copied().fold(f64::INFINITY, f64::min);
+    let high = data_plateau
+        .iter()
+        .copied()
+        .fold(f64::NEG_INFINITY, f64::max);
     for method in ["shepard", "nearest", "averaged"] {
         let p1: Vec<(f64, f64)> = series(&out.join("probes.csv"), &format!("P1.{method}"))
             .iter()
@@ -85,6 +112,16 @@ fn p1_first_rise_matches_buchner() {
         assert!(
             (simulated - measured).abs() < 0.1,
             "P1.{method} first rise at t* = {simulated:.3}, Buchner {measured:.3}"
+        );
+        let samples = plateau(&p1);
+        assert!(
+            samples.len() >= 10,
+            "P1.{method}: too few samples in t* 2.7-3.3"
+        );
+        let mean = samples.iter().sum::<f64>() / samples.len() as f64;
+        assert!(
+            (low..=high).contains(&mean),
+            "P1.{method} mean p* over t* 2.7-3.3 = {mean:.3}, Buchner spans {low:.3}-{high:.3}"
         );
     }
 }

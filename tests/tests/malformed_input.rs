@@ -322,7 +322,7 @@ fn cases() -> Vec<Case> {
             "sensor on a nonexistent wall",
             dam_value(
                 "pressure_sensors",
-                "[\n        (name: \"P1\", wall: \"right\", at: (3.22, 0.16)),\n        \
+                "[\n        (name: \"P1\", wall: \"right\", at: (3.22, 0.096)),\n        \
                  (name: \"P2\", wall: \"rigth\", at: (3.22, 0.584)),\n    ]",
             ),
             LineOf("wall: \"rigth\""),
