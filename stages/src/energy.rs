@@ -1,4 +1,4 @@
-//! Energy budget (physics.md, "Energy budget"): kinetic sum m|v|^2/2, potential
+//! Energy budget (docs/physics.md, "Energy budget"): kinetic sum m|v|^2/2, potential
 //! -sum m g.x (zero at y = 0), internal sum m e(rho) with e the Tait internal energy,
 //! and viscous, the work dissipated by the artificial viscosity integrated over time.
 //! Written to `energy.csv` (time, kinetic, potential, internal, viscous, total) and

@@ -1,4 +1,4 @@
-//! Tait equation of state p = B [(rho/rho_0)^gamma - 1] (physics.md) for fluid and
+//! Tait equation of state p = B [(rho/rho_0)^gamma - 1] (docs/physics.md, "Governing equations") for fluid and
 //! ghost particles.
 
 use rayon::prelude::*;

@@ -1,4 +1,4 @@
-//! Mirrored ghost-particle walls (physics.md, "Walls: mirrored ghost particles").
+//! Mirrored ghost-particle walls (docs/physics.md, "Walls: mirrored ghost particles").
 //!
 //! Every fluid particle within one kernel support of a wall is mirrored across it; near
 //! a corner where two walls meet it is also mirrored across both (the double mirror).

@@ -1,5 +1,5 @@
 //! Time integration: Monaghan's leapfrog with one force evaluation per step, and the
-//! adaptive step dt = C min( h / (c_max + max|v|), sqrt(h / max|a|) ) (physics.md,
+//! adaptive step dt = C min( h / (c_max + max|v|), sqrt(h / max|a|) ) (docs/physics.md,
 //! "Time step"). It also watches for instability.
 //!
 //! Velocity and density are carried at half steps (`HalfVelocity`, `HalfDensity`):
@@ -51,7 +51,7 @@ pub struct Params {
     /// stops spray from thinning without bound (the continuity equation rarefies a
     /// particle its neighbours move away from, and nothing pushes back on a pressureless
     /// particle); the density guard still catches a compression beyond
-    /// rho_0 (1 + `density_limit`). Not in physics.md. Default None: no floor.
+    /// rho_0 (1 + `density_limit`). Not part of the model (docs/physics.md, "Safeguards outside the model"). Default None: no floor.
     pub density_floor: Option<f64>,
 }
 

@@ -1,4 +1,4 @@
-//! The standard WCSPH stages (physics.md). One stage per file; each registers under its
+//! The standard WCSPH stages (docs/physics.md). One stage per file; each registers under its
 //! snake_case name with a typed parameter struct whose fields document their defaults.
 //!
 //! A usual step, in pipeline order:

@@ -1,5 +1,5 @@
 //! Neighbour search: a cell-linked list with cells the size of the kernel support
-//! (physics.md, "Neighbour search"), over fluid and ghost particles together.
+//! (docs/physics.md, "Neighbour search"), over fluid and ghost particles together.
 //!
 //! Publishes [`Neighbours`]: for every fluid particle the list of particles within the
 //! support (joint numbering: fluid `0..n_fluid`, then ghosts), in a fixed order — cells

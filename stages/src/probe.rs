@@ -3,7 +3,7 @@
 //! into `probes.csv` (column `time`, then `<sensor>.<method>`, `<gauge>`, `front`, ...)
 //! and plotted at the end of the run.
 //!
-//! Pressure extraction (physics.md, "Wall-pressure extraction"):
+//! Pressure extraction (docs/physics.md, "Wall-pressure extraction"):
 //! - Method I (`shepard`): Shepard interpolation of fluid and ghost pressures at the
 //!   sensor point.
 //! - Method II (`nearest`): the nearest fluid particle's pressure, corrected to the

@@ -1,4 +1,4 @@
-//! Density re-initialisation (Colagrossi & Landrini 2003; physics.md, "Density
+//! Density re-initialisation (Colagrossi & Landrini 2003; docs/physics.md, "Density
 //! re-initialisation"), by the Shepard filter
 //!   rho_i = sum_j m_j W_ij / sum_j (m_j/rho_j) W_ij   (j over fluid, ghosts and i itself)
 //! or the first-order MLS filter ([`crate::mls`]), which keeps a linear (hydrostatic)

@@ -1,5 +1,5 @@
 //! The neighbour search's candidate scan: from the particles of the cells around a
-//! fluid particle, keep those within one kernel support (physics.md, "Neighbour
+//! fluid particle, keep those within one kernel support (docs/physics.md, "Neighbour
 //! search"). Most candidates are rejected (about 21 of 60 are kept), so this loop is
 //! the grid stage's cost.
 //!

@@ -1,4 +1,4 @@
-//! Still water (scenes.md `hydrostatic`, analytic.md section 1): after the start-up
+//! Still water (docs/scenes.md `hydrostatic`, docs/analytic.md section 1): after the start-up
 //! transient the pressure below the surface layer matches rho_0 g (H - y), no particle
 //! crosses a wall over 3 s, and the water stays still.
 
@@ -10,7 +10,7 @@ const SCENE: &str = include_str!("../../scenarios/hydrostatic.ron");
 
 #[test]
 fn hydrostatic_tank_holds_its_pressure_and_its_particles() {
-    // H/ds = 40 as analytic.md asks; the tank is made 0.99 m wide so 66 whole columns
+    // H/ds = 40 as docs/analytic.md asks; the tank is made 0.99 m wide so 66 whole columns
     // fill it.
     let scenario = load(
         SCENE,
@@ -38,7 +38,7 @@ fn hydrostatic_tank_holds_its_pressure_and_its_particles() {
     );
 
     // Every particle below the surface layer (two kernel supports deep) within 2 % of
-    // rho_0 g H of the hydrostatic pressure: analytic.md's suggested tolerance for
+    // rho_0 g H of the hydrostatic pressure: docs/analytic.md's suggested tolerance for
     // H/ds >= 40. (The kernel's discrete gradient moment, 0.997 for Wendland at
     // h/ds = 1.5, biases the equilibrium by ~0.3 %; acoustic ringing adds ~1 %.)
     let particles = Particles::of(&sim.world).expect("fluid");

@@ -1,4 +1,4 @@
-//! Rolling tank (scenes.md `sloshing`, analytic.md section 4): a tilted tank at rest,
+//! Rolling tank (docs/scenes.md `sloshing`, docs/analytic.md section 4): a tilted tank at rest,
 //! sensors riding with the tank, and the roll response against linear theory.
 
 use glam::DVec2;
@@ -196,13 +196,13 @@ fn small_roll_response_peaks_at_the_first_natural_frequency_and_matches_linear_t
         sph_peak / sigma1
     );
 
-    // Off resonance (|sigma/sigma_1 - 1| = 0.3, outside analytic.md's +-0.15 band):
+    // Off resonance (|sigma/sigma_1 - 1| = 0.3, outside docs/analytic.md's +-0.15 band):
     // amplitude within 10 % of linear theory for the same motion, start and fit window
     // (damped by the scheme's equivalent viscosity), phase within 10 degrees.
     // The 10 %: at h/ds = 12 the first-mode frequency is good to ~2 % (the peak above),
     // and the linear amplitude moves 2/|1 - r^2| = 4x (r = 0.7) and 3x (r = 1.3) as
     // fast as sigma_1, so 6-8 %; the fit of the decaying start-up transient adds ~2 %.
-    // analytic.md's 5 % presumes h/ds >= 40.
+    // docs/analytic.md's 5 % presumes h/ds >= 40.
     for r in responses
         .iter()
         .filter(|r| (r.case.omega / sigma1 - 1.0).abs() > 0.25)

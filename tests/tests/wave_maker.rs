@@ -1,4 +1,4 @@
-//! Piston wave maker (scenes.md `wave_maker`, analytic.md section 5): the paddle
+//! Piston wave maker (docs/scenes.md `wave_maker`, docs/analytic.md section 5): the paddle
 //! follows its prescribed stroke, feels the hydrostatic force at rest, and no particle
 //! gets through it or out of the flume, and a regular wave has Biesel's height and the
 //! dispersion relation's wavelength (docs/validation.md, "Wave maker").

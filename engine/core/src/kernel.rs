@@ -1,4 +1,4 @@
-//! 2D smoothing kernels (physics.md, "Kernels").
+//! 2D smoothing kernels (docs/physics.md, "Kernels").
 //!
 //! Each kernel is a small `Copy` value built once per run from the smoothing length
 //! `h`, holding its normalisation, so the hot loops are monomorphised over the kernel

@@ -1,4 +1,4 @@
-//! Linear sloshing in a rectangular tank (analytic.md section 4; Faltinsen & Timokha
+//! Linear sloshing in a rectangular tank (docs/analytic.md section 4; Faltinsen & Timokha
 //! 2009, ch. 4-5): natural frequencies, and the steady roll moment of the liquid on a
 //! tank rolling harmonically, theta = theta_a sin(sigma t), about an axis on the tank's
 //! centre line. Used for the sweep's reference curve and the tests; the exact moment of
@@ -20,7 +20,7 @@ pub struct RectangularTank {
     /// Gravity g [m/s^2].
     pub gravity: f64,
     /// Kinematic viscosity nu [m^2/s] damping each mode's amplitude at the rate
-    /// 2 nu k_n^2 (Lamb 1932, section 348; analytic.md section 4); 0 for the undamped
+    /// 2 nu k_n^2 (Lamb 1932, section 348; docs/analytic.md section 4); 0 for the undamped
     /// theory. For SPH with artificial viscosity, nu = alpha h c_0 / 8 (Monaghan 2005).
     pub viscosity: f64,
 }
@@ -255,7 +255,7 @@ mod tests {
 
     #[test]
     fn natural_period_matches_the_test10_document() {
-        // analytic.md: T1 = 1.917 s for L = 0.9 m, h = 0.093 m; 1.167 s for h = 0.3556 m.
+        // docs/analytic.md: T1 = 1.917 s for L = 0.9 m, h = 0.093 m; 1.167 s for h = 0.3556 m.
         let t1 = 2.0 * PI / spheric_low().natural_frequency(1);
         assert!((t1 - 1.917).abs() < 1e-3, "{t1}");
         let high = RectangularTank {
@@ -268,7 +268,7 @@ mod tests {
     #[test]
     fn quasi_static_limit_is_the_tilted_tank_moment() {
         // sigma -> 0: M_R = rho g theta (L^3/12 + L h^2/2) about the bottom centre
-        // (analytic.md's check), and the exact tilted moment agrees for small theta.
+        // (docs/analytic.md's check), and the exact tilted moment agrees for small theta.
         let t = spheric_low();
         let (l, h) = (t.breadth, t.depth);
         let linear = t.roll_moment_per_radian(1e-4, 0.0);

@@ -101,7 +101,7 @@ pub struct Piston;
 
 /// Biesel's first-order transfer function of a piston wave maker: wave height over
 /// stroke, H/S = 2 (cosh 2kd - 1) / (sinh 2kd + 2kd) = 4 sinh^2(kd) / (2kd + sinh 2kd)
-/// (analytic.md section 5; Dean & Dalrymple 1991, ch. 6).
+/// (docs/analytic.md section 5; Dean & Dalrymple 1991, ch. 6).
 pub fn biesel_height_over_stroke(kd: f64) -> f64 {
     4.0 * kd.sinh().powi(2) / (2.0 * kd + (2.0 * kd).sinh())
 }

@@ -169,7 +169,7 @@ pub struct WallSpec {
 }
 
 /// A rectangle of fluid at rest, filled on a square lattice of spacing ds with
-/// hydrostatic density (analytic.md section 1).
+/// hydrostatic density (docs/analytic.md section 1).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BlockSpec {
@@ -615,7 +615,7 @@ impl Scenario {
     /// Initial fluid particles: each block filled on a square lattice of spacing ds,
     /// first row and column ds/2 inside the block, with hydrostatic density
     /// rho(y) = rho_0 [1 + rho_0 g (H - y)/B]^(1/gamma) and mass rho(y) ds^2 so the
-    /// column starts in equilibrium (analytic.md section 1).
+    /// column starts in equilibrium (docs/analytic.md section 1).
     pub fn initial_particles(&self) -> Vec<(DVec2, f64, f64)> {
         let ds = self.spacing;
         let eos = self.eos();

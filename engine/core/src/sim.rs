@@ -21,7 +21,7 @@ pub struct Clock {
 }
 
 /// The Tait equation of state p = B [(rho/rho_0)^gamma - 1], B = rho_0 c_0^2 / gamma
-/// (physics.md, "Governing equations").
+/// (docs/physics.md, "Governing equations").
 #[derive(Clone, Copy, Debug)]
 pub struct Tait {
     pub rho0: f64,

@@ -358,7 +358,7 @@ fn theory_curve(base: &Scenario, f: f64, lo: f64, hi: f64, cap: f64) -> Vec<(f64
 /// (whole rows of ds, see `Scenario::initial_particles`) at filling `f`.
 ///
 /// It is damped by the artificial viscosity's equivalent kinematic viscosity
-/// nu = alpha h c_0 / 8 (Monaghan 2005; analytic.md section 4), alpha from the
+/// nu = alpha h c_0 / 8 (Monaghan 2005; docs/analytic.md section 4), alpha from the
 /// pipeline's Forces stage: the damping the SPH scheme itself applies, so that the
 /// transient left by the start decays in theory as it does in the run.
 pub fn linear_tank(scenario: &Scenario, f: f64) -> RectangularTank {

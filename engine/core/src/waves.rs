@@ -198,7 +198,7 @@ pub fn wavenumber_fit(gauges: &[GaugeHarmonic], k_range: (f64, f64)) -> Option<f
     misfit(k).is_finite().then_some(k)
 }
 
-/// Linear theory for a flume driven by a sinusoidal piston (analytic.md section 5),
+/// Linear theory for a flume driven by a sinusoidal piston (docs/analytic.md section 5),
 /// and the gauges to compare with it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct WaveTheory {
