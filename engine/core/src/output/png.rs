@@ -367,7 +367,21 @@ mod tests {
         let path = dir.join("snap.png");
         write_snapshot(&path, &snap).unwrap();
         let layout = Layout::new(900, snap.bounds, snap.value_range).unwrap();
-        assert_png(&path, layout.size);
+        let img = assert_png(&path, layout.size);
+        // The particles are drawn: coloured (not grey) pixels beyond the colour bar's,
+        // at least a quarter of the block's share of the plotting area (1 m x 1 m of
+        // 4.2 x 2.2 m; dots of radius 1 px on a 3.2 px lattice cover about half of it).
+        let coloured = img
+            .pixels()
+            .filter(|p| !(p[0] == p[1] && p[1] == p[2]))
+            .count();
+        let bar = (layout.bar_w + 1) * layout.plot.1;
+        let block = layout.plot.0 * layout.plot.1 / 40;
+        assert!(
+            coloured as u32 > bar + block,
+            "{coloured} coloured pixels, colour bar {bar}, plot {:?}",
+            layout.plot
+        );
         assert_eq!(
             fs::read_dir(&dir).unwrap().count(),
             1,
