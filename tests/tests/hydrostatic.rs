@@ -77,6 +77,22 @@ fn hydrostatic_tank_holds_its_pressure_and_its_particles() {
         }
     }
 
+    // energy.csv starts with the initial state at t = 0: water at rest (no kinetic
+    // energy, nothing dissipated), potential M g H / 2 of the uniform column (to 1 %:
+    // the initial densities follow the hydrostatic profile, the masses rho_0 ds^2 do not).
+    let energy = out.join("energy.csv");
+    let first = |name: &str| series(&energy, name)[0];
+    let mass = rho0 * 0.99 * h;
+    assert_eq!(first("kinetic"), (0.0, 0.0));
+    assert_eq!(first("viscous"), (0.0, 0.0));
+    let (t0, potential) = first("potential");
+    assert_eq!(t0, 0.0);
+    assert!(
+        (potential / (mass * g * h / 2.0) - 1.0).abs() < 0.01,
+        "initial potential energy {potential} J/m, M g H / 2 = {} J/m",
+        mass * g * h / 2.0
+    );
+
     // The water stays still: no speed above 1 % of sqrt(g H) (0.024 m/s) at any time.
     let bound = 0.01 * (g * h).sqrt();
     let fastest = series(&probes, "max_speed")
