@@ -8,7 +8,7 @@
 
 use crate::forces::ViscousDissipation;
 use serde::{Deserialize, Serialize};
-use sph_core::checkpoint::{Dec, Enc};
+use sph_core::checkpoint::{Dec, Enc, Resuming};
 use sph_core::components::{Density, Mass, Position, Velocity};
 use sph_core::series::SeriesWriter;
 use sph_core::sim::Sim;
@@ -94,8 +94,18 @@ impl Stage for Energy {
         sim.resources.insert(ViscousDissipation::default());
         let columns = COLUMNS.iter().map(|c| c.to_string()).collect();
         let path = sim.out_dir.join("energy.csv");
-        let out = SeriesWriter::open_sampled(sim, &path, columns, self.params.interval);
-        self.out = Some(out.map_err(|m| SetupError::new("energy", m))?);
+        let mut out = SeriesWriter::open_sampled(sim, &path, columns, self.params.interval)
+            .map_err(|m| SetupError::new("energy", m))?;
+        // The initial state is the first row (t = 0, nothing dissipated yet); a resumed
+        // run has it already.
+        if sim.resources.get::<Resuming>().is_none() {
+            let setup_err = |e: StepError| SetupError::new("energy", e.to_string());
+            let [k, p, i] = energies(sim).map_err(setup_err)?;
+            out.push(sim.clock.time, vec![k, p, i, 0.0, k + p + i])
+                .map_err(setup_err)?;
+            self.next = sim.clock.time + self.params.interval;
+        }
+        self.out = Some(out);
         Ok(())
     }
 

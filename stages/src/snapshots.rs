@@ -5,7 +5,7 @@ use glam::DVec2;
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::{Position, Pressure};
-use sph_core::output::png::{write_snapshot, Snapshot};
+use sph_core::output::png::{pressure_colour_range, write_snapshot, Snapshot};
 use sph_core::sim::Sim;
 use sph_core::stage::{Stage, StepError};
 use sph_core::walls::WallSet;
@@ -18,7 +18,9 @@ pub struct Params {
     /// Simulated times [s] to draw; each is drawn at the first step at or after it,
     /// named by the requested time (the title gives the actual time).
     pub times: Vec<f64>,
-    /// Colour scale [Pa]; default (0, rho_0 |g| H) with H the tallest initial fluid block.
+    /// Colour scale [Pa]; default per picture: 0 (or the 1st percentile if negative) to
+    /// the 99th percentile of the drawn pressures (`pressure_colour_range`), falling
+    /// back to (0, rho_0 |g| H), H the tallest initial fluid block.
     pub pressure_range: Option<(f64, f64)>,
     /// Image width [px]. Default 1200.
     pub width: u32,
@@ -142,10 +144,10 @@ impl Stage for Snapshots {
                 ),
         };
         let c = &sim.constants;
-        let range = self
-            .params
-            .pressure_range
-            .unwrap_or((0.0, c.eos.rho0 * c.gravity.length() * c.fluid_height));
+        let range = self.params.pressure_range.unwrap_or_else(|| {
+            let fallback = (0.0, c.eos.rho0 * c.gravity.length() * c.fluid_height);
+            pressure_colour_range(&values, fallback)
+        });
         let path = sim.out_dir.join(format!("snapshot_t{t:.3}.png"));
         let title = format!("{}  t = {:.3} s", sim.name, sim.clock.time);
         let snapshot = Snapshot {

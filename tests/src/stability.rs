@@ -3,7 +3,7 @@
 //! fluctuation, the mechanical-energy gain and total-energy drift, particles outside
 //! the walls or the domain and non-finite values at the end.
 
-use crate::support::{load, read_csv, temp_out};
+use crate::support::{load, nan_max, read_csv, temp_out};
 use sph_core::components::{Density, Position, Velocity};
 use sph_core::runner::{run_keeping_state, RunOptions};
 use sph_core::walls::WallSet;
@@ -162,7 +162,8 @@ impl Stability {
         let probes = self.out.join("probes.csv");
         let rho = column(&probes, "max_density_fluctuation")
             .expect("the scenario needs Probe(density_fluctuation: true)");
-        let max = |s: &[(f64, f64)]| s.iter().map(|p| p.1).fold(0.0, f64::max);
+        // NaN-propagating: a NaN sample makes the measure NaN (then infinite, below).
+        let max = |s: &[(f64, f64)]| s.iter().map(|p| p.1).fold(0.0, nan_max);
         self.density_fluctuation = max(&rho);
         self.max_speed = column(&probes, "max_speed").map_or(0.0, |s| max(&s));
         self.time = total.last().map_or(0.0, |p| p.0);
@@ -175,17 +176,18 @@ impl Stability {
             self.mechanical_gain = mechanical
                 .iter()
                 .map(|m| (m - m0) / self.energy_scale)
-                .fold(0.0, f64::max);
+                .fold(0.0, nan_max);
             self.total_drift = total
                 .iter()
                 .map(|t| ((t.1 - t0.1) / self.energy_scale).abs())
-                .fold(0.0, f64::max);
+                .fold(0.0, nan_max);
         }
-        // A non-finite sample counts as unbounded.
+        // A non-finite sample counts as unbounded (and fails any finite bound).
         for v in [
             &mut self.density_fluctuation,
             &mut self.mechanical_gain,
             &mut self.total_drift,
+            &mut self.max_speed,
         ] {
             if v.is_nan() {
                 *v = f64::INFINITY;
@@ -282,4 +284,90 @@ pub struct Bounds {
     pub mechanical_gain: f64,
     pub total_drift: f64,
     pub max_speed: f64,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A run's outputs with a NaN in one probe or energy sample among finite ones.
+    fn with_nan_in(file: &str, column: usize) -> Stability {
+        let out = temp_out("stability-nan");
+        std::fs::create_dir_all(&out).unwrap();
+        let mut energy = vec![
+            "time,kinetic,potential,internal,viscous,total".to_string(),
+            "0,0,10,0,0,10".into(),
+            "0.1,1,9,0,0,10".into(),
+            "0.2,0.5,9.5,0,0,10".into(),
+        ];
+        let mut probes = vec![
+            "time,max_density_fluctuation,max_speed".to_string(),
+            "0,0.01,0".into(),
+            "0.1,0.02,1".into(),
+            "0.2,0.01,0.5".into(),
+        ];
+        let rows = match file {
+            "energy.csv" => Some(&mut energy),
+            "probes.csv" => Some(&mut probes),
+            _ => None,
+        };
+        if let Some(rows) = rows {
+            let mut cells: Vec<String> = rows[2].split(',').map(str::to_string).collect();
+            cells[column] = "NaN".into();
+            rows[2] = cells.join(",");
+        }
+        std::fs::write(out.join("energy.csv"), energy.join("\n") + "\n").unwrap();
+        std::fs::write(out.join("probes.csv"), probes.join("\n") + "\n").unwrap();
+        let mut s = Stability {
+            outcome: Outcome::Finished,
+            time: 0.0,
+            density_fluctuation: 0.0,
+            mechanical_gain: 0.0,
+            total_drift: 0.0,
+            max_speed: 0.0,
+            outside: 0,
+            non_finite: 0,
+            reflections: 0.0,
+            particles: 1,
+            energy_scale: 10.0,
+            out,
+        };
+        s.read_outputs();
+        let _ = std::fs::remove_dir_all(&s.out);
+        s
+    }
+
+    /// The NaN guard fires: a NaN sample in any measured column makes its measure
+    /// infinite, and the bound check fails on it (`f64::max` dropped such a NaN and
+    /// the measure came out as the other samples' largest).
+    #[test]
+    fn a_nan_sample_fails_the_bounds() {
+        let finite = with_nan_in("neither", 0);
+        assert_eq!(finite.density_fluctuation, 0.02);
+        assert_eq!(finite.max_speed, 1.0);
+        let bounds = Bounds {
+            density: 1.0,
+            mechanical_gain: 1.0,
+            total_drift: 1.0,
+            max_speed: 10.0,
+        };
+        finite.assert_bounds("finite", &bounds);
+        let cases = [
+            ("probes.csv", 1, "max |rho/rho0 - 1|"),
+            ("probes.csv", 2, "max speed"),
+            ("energy.csv", 1, "mechanical gain"),
+            ("energy.csv", 5, "total drift"),
+        ];
+        for (file, column, measure) in cases {
+            let s = with_nan_in(file, column);
+            let failed = std::panic::catch_unwind(|| s.assert_bounds("nan", &bounds)).expect_err(
+                &format!("a NaN in {file} column {column} passed the bounds"),
+            );
+            let message = failed.downcast_ref::<String>().cloned().unwrap_or_default();
+            assert!(
+                message.starts_with(&format!("{measure} = inf")),
+                "{file} column {column}: {message}"
+            );
+        }
+    }
 }

@@ -95,7 +95,7 @@ dam_break_cases! {
 /// integrator's density limit: stopping with a located diagnostic is then the
 /// required outcome.
 #[test]
-#[ignore = "fine: ten 80,000-particle runs"]
+#[ignore = "fine: ten 80,000-particle runs of 21-41 min each; last measured: Wendland with and Gaussian without artificial pressure finished within the bounds (docs/validation.md, Fine runs); the other eight never run"]
 fn fine_dam_break_c12_80k_every_kernel() {
     // SPH_HARD_KERNELS=Wendland,Gaussian runs a subset.
     let only = std::env::var("SPH_HARD_KERNELS").unwrap_or_default();
@@ -141,9 +141,11 @@ fn hydrostatic_tank_20s() {
         .assert_finished_within("hydrostatic 20 s, ds = 0.05", &hydrostatic_bounds(0.05));
 }
 
-/// H/ds = 48, the shipped resolution (3,840 particles).
+/// H/ds = 48, the shipped resolution (3,840 particles). Known to fail on speed: the
+/// bottom row sways at t ~ 2.6-3.1 s (docs/validation.md, finding 6); the bound is
+/// left as it is rather than widened.
 #[test]
-#[ignore = "fine: 20 s at 3,840 particles"]
+#[ignore = "fine: 20 s at 3,840 particles (18 min); last measured: FAILS, max speed 0.031 m/s at t = 3.10 s above the 0.024 m/s bound (docs/validation.md, finding 6)"]
 fn fine_hydrostatic_tank_20s() {
     hydrostatic_20s(0.0125)
         .assert_finished_within("hydrostatic 20 s, ds = 0.0125", &hydrostatic_bounds(0.0125));
@@ -190,7 +192,7 @@ fn sloshing_at_resonance_60s() {
 
 /// The shipped resolution, 81 across (2,592 particles).
 #[test]
-#[ignore = "fine: 60 s at 2,592 particles"]
+#[ignore = "fine: 60 s at 2,592 particles (about 670,000 steps); never run"]
 fn fine_sloshing_at_resonance_60s() {
     sloshing_resonance_60s(81).assert_finished_within(
         "sloshing 70 % at resonance, 60 s, 81 across",

@@ -2,10 +2,11 @@
 //! sensors riding with the tank, and the roll response against linear theory.
 
 use glam::DVec2;
-use sph_core::components::{Mass, ParticleId, PressureSensor};
+use sph_core::components::{Mass, PressureSensor};
 use sph_core::linear_sloshing::{tilted_tank_moment, RectangularTank};
 use sph_core::walls::WallSet;
 use sph_core::world::Particles;
+use sph_tests::stability::{run_hard_case, Bounds, Outcome};
 use sph_tests::support::{load, run_completed, series};
 
 const TANK: &str = include_str!("../scenarios/rolling_tank.ron");
@@ -272,10 +273,9 @@ fn a_roll_series_from_csv_drives_the_tank_like_the_harmonic_it_samples() {
     }
 }
 
-/// The long run at resonance: `cargo test --release -p sph-tests --test sloshing -- --ignored`
-/// (about 5 minutes on 2 cores).
+/// The long run at resonance: `cargo test --release -p sph-tests --test sloshing -- --ignored --nocapture`.
 #[test]
-#[ignore]
+#[ignore = "long: 60 s of simulated time at 810 particles (5.5 min on 2 shared cores); last measured: finished, max |rho/rho0 - 1| 0.100 (the density floor), max speed 4.1 m/s, 18 wall reflections, none outside, none non-finite"]
 fn sixty_seconds_at_resonance_stay_stable_and_inside_the_tank() {
     // SPHERIC Test 10 low filling at a coarse ds = 10 mm (9 rows of water), rolled at
     // the first natural period of that depth for 60 s, with the shipped wall treatment:
@@ -294,45 +294,40 @@ fn sixty_seconds_at_resonance_stay_stable_and_inside_the_tank() {
             viscosity: 0.0,
         }
         .natural_frequency(1);
-    let scenario = load(
+    let period = format!("tank.motion.roll.period={t1}");
+    let ramp = format!("tank.motion.ramp={t1}");
+    let s = run_hard_case(
         include_str!("../../scenarios/sloshing.ron"),
         "scenarios/sloshing.ron",
         &[
             "resolution=ParticlesAcross(90)",
             "end_time=60.0",
-            "pipeline.vtk_frames.interval=1.0",
-            "pipeline.snapshots.times=[59.0]",
             "pipeline.probe.interval=0.01",
-            &format!("tank.motion.roll.period={t1}"),
-            &format!("tank.motion.ramp={t1}"),
+            "pipeline.probe.max_speed=true",
+            &period,
+            &ramp,
         ],
     );
-    let start = scenario.initial_particles();
-    let (summary, sim, out) = run_completed(scenario, "resonance60", 2);
-    // Mass conserved exactly: every particle still there with its initial mass
-    // (compared per particle, by ParticleId: the cell sort reorders the columns, so a
-    // plain sum would differ in its last bits).
-    let particles = Particles::of(&sim.world).expect("fluid");
-    let masses = particles.fluid::<Mass>().unwrap();
-    let ids = particles.fluid::<ParticleId>().unwrap();
-    assert_eq!(masses.len(), start.len(), "particles were lost");
-    for (id, m) in ids.iter().zip(masses.iter()) {
-        assert_eq!(
-            m.0, start[id.0 as usize].2,
-            "particle {} changed mass",
-            id.0
-        );
+    // The roll moment stays finite throughout (read before the folder is removed).
+    if s.outcome == Outcome::Finished {
+        let moment = series(&s.out.join("probes.csv"), "roll_moment");
+        let bad = moment.iter().find(|p| !p.1.is_finite());
+        assert!(bad.is_none(), "roll moment {bad:?}");
     }
-    let moment = series(&out.join("probes.csv"), "roll_moment");
-    assert!(moment.iter().all(|p| p.1.is_finite()));
-    eprintln!(
-        "60 s at T1 = {t1:.4} s: {} steps, {} wall reflections, {:.1} s wall, {:.3e} particle-steps/s, max density fluctuation {:.4}",
-        summary.steps,
-        summary.diagnostics.get("wall_reflections").copied().unwrap_or(0.0),
-        summary.wall_seconds,
-        summary.particle_steps_per_second,
-        series(&out.join("probes.csv"), "max_density_fluctuation")
-            .iter()
-            .fold(0.0f64, |m, p| m.max(p.1))
+    // Finished, every particle inside the tank with finite values, and:
+    let bounds = Bounds {
+        // Impacts compress the water to 1.12 rho_0 in the shipped 16-row run (the
+        // scenario's comment); twice that at resonance. The floor holds rarefied spray
+        // at 0.9 rho_0 (the measured 0.100 is that floor).
+        density: 0.25,
+        // The rolling tank does work on the water: energy is not bounded.
+        mechanical_gain: f64::INFINITY,
+        total_drift: f64::INFINITY,
+        // Three times the ~3 m/s run-up jets c_0 = 30 m/s was chosen for (Mach 0.3).
+        max_speed: 9.0,
+    };
+    s.assert_finished_within(
+        &format!("sloshing 18 % at resonance (T1 = {t1:.4} s), 60 s, 90 across"),
+        &bounds,
     );
 }

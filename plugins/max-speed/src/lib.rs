@@ -130,7 +130,11 @@ pub fn max_fluid_speed(sim: &Sim) -> Result<f64, StepError> {
     let v = particles.fluid::<Velocity>()?;
     // A serial fold: exact and independent of the thread count. (A hot stage would use
     // rayon's `par_iter` on the slice; `max` is order-independent so it stays exact.)
-    Ok(v.iter().map(|v| v.0.length()).fold(0.0, f64::max))
+    // NaN-propagating (not f64::max, which drops a NaN): the caller's finiteness check
+    // must see a NaN velocity.
+    Ok(v.iter()
+        .map(|v| v.0.length())
+        .fold(0.0, crate::support::nan_max))
 }
 
 impl Stage for MaxSpeed {

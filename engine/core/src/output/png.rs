@@ -244,6 +244,28 @@ fn draw_colour_bar(
     Ok(())
 }
 
+/// The default colour scale of a pressure picture: from 0 (or the 1st percentile of
+/// the finite `values`, if that is below 0) to their 99th percentile, so at most 1 % of
+/// the particles saturate at either end whatever the flow (a sloshing tank whose water
+/// piles up against one wall, a dam break's impact); `fallback` if that range is empty
+/// (no finite values, or all at or below 0).
+pub fn pressure_colour_range(values: &[f64], fallback: (f64, f64)) -> (f64, f64) {
+    let mut finite: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
+    if finite.is_empty() {
+        return fallback;
+    }
+    let mut percentile = |q: f64| {
+        let k = ((finite.len() - 1) as f64 * q).round() as usize;
+        *finite.select_nth_unstable_by(k, f64::total_cmp).1
+    };
+    let (lo, hi) = (percentile(0.01).min(0.0), percentile(0.99));
+    if hi > lo && (hi - lo).is_finite() {
+        (lo, hi)
+    } else {
+        fallback
+    }
+}
+
 /// The colour scale: `requested` if finite and increasing, else the finite data range; never empty.
 fn colour_range(requested: (f64, f64), values: &[f64]) -> (f64, f64) {
     let (a, b) = requested;
@@ -367,7 +389,21 @@ mod tests {
         let path = dir.join("snap.png");
         write_snapshot(&path, &snap).unwrap();
         let layout = Layout::new(900, snap.bounds, snap.value_range).unwrap();
-        assert_png(&path, layout.size);
+        let img = assert_png(&path, layout.size);
+        // The particles are drawn: coloured (not grey) pixels beyond the colour bar's,
+        // at least a quarter of the block's share of the plotting area (1 m x 1 m of
+        // 4.2 x 2.2 m; dots of radius 1 px on a 3.2 px lattice cover about half of it).
+        let coloured = img
+            .pixels()
+            .filter(|p| !(p[0] == p[1] && p[1] == p[2]))
+            .count();
+        let bar = (layout.bar_w + 1) * layout.plot.1;
+        let block = layout.plot.0 * layout.plot.1 / 40;
+        assert!(
+            coloured as u32 > bar + block,
+            "{coloured} coloured pixels, colour bar {bar}, plot {:?}",
+            layout.plot
+        );
         assert_eq!(
             fs::read_dir(&dir).unwrap().count(),
             1,
@@ -440,6 +476,28 @@ mod tests {
         };
         write_snapshot(&path, &tall).unwrap();
         fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn default_pressure_scale_spans_the_1st_to_99th_percentile() {
+        let fallback = (0.0, 912.0);
+        // 1,000 pressures 0..2,997 Pa (a tank deeper on one side than the fallback's H)
+        // and 5 impact spikes: the spikes and the top 1 % saturate, nothing else.
+        let mut p: Vec<f64> = (0..1000).map(|i| 3.0 * f64::from(i)).collect();
+        p.extend([5e4, 6e4, 7e4, 8e4, f64::NAN]);
+        let (lo, hi) = pressure_colour_range(&p, fallback);
+        assert_eq!(lo, 0.0);
+        let saturated = p.iter().filter(|&&v| v > hi).count();
+        assert!((5..=11).contains(&saturated), "{hi}: {saturated} above");
+        assert!(hi > 2900.0 && hi < 3000.0, "{hi}");
+        // Tension below 0 widens the scale downwards; degenerate frames fall back.
+        let mut q: Vec<f64> = (0..1000).map(|i| f64::from(i) - 100.0).collect();
+        q.reverse();
+        assert_eq!(pressure_colour_range(&q, fallback), (-90.0, 889.0));
+        assert_eq!(pressure_colour_range(&[], fallback), fallback);
+        assert_eq!(pressure_colour_range(&[0.0, 0.0], fallback), fallback);
+        assert_eq!(pressure_colour_range(&[f64::NAN], fallback), fallback);
+        assert_eq!(pressure_colour_range(&[-5.0], fallback), fallback);
     }
 
     #[test]
