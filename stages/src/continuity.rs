@@ -1,7 +1,6 @@
 //! Continuity equation d rho_i/dt = sum_j m_j v_ij . grad_i W_ij (physics.md,
 //! "Governing equations"), summed over fluid and ghost neighbours.
 
-use crate::neighbour_grid::Neighbours;
 use crate::packed::{with_packed, Fill};
 use crate::pair_x8::WendlandX8;
 use rayon::prelude::*;
@@ -10,6 +9,7 @@ use sph_core::components::{DensityRate, Fluid};
 use sph_core::kernel::Kernel;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
+use sph_core::vocab::{require_neighbours, ContinuityInPipeline, Neighbours};
 use sph_core::world::ensure_component;
 use sph_core::{with_kernel, StageRegistry};
 
@@ -70,21 +70,5 @@ impl Stage for Continuity {
             Ok(())
         })?;
         Ok(())
-    }
-}
-
-/// Marks that a `Continuity()` stage writes the density rate (so `Forces` refuses to
-/// write it too).
-pub struct ContinuityInPipeline;
-
-/// Setup check shared by the stages that sum over neighbours.
-pub fn require_neighbours(sim: &Sim, stage: &'static str) -> Result<(), SetupError> {
-    if sim.resources.contains::<Neighbours>() {
-        Ok(())
-    } else {
-        Err(SetupError::new(
-            stage,
-            "needs neighbour lists: put NeighbourGrid() before it in the pipeline",
-        ))
     }
 }

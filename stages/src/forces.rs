@@ -4,12 +4,10 @@
 //! artificial pressure R f_ij^n against the tensile instability.
 //!
 //! With `with_continuity: true` the same neighbour loop also evaluates the continuity
-//! equation (as [`crate::continuity`] does, term for term in the same order, so the
+//! equation (as the `Continuity` stage does, term for term in the same order, so the
 //! result is bit-identical to `Continuity()` placed before `Forces()`): one pass over
 //! the neighbours instead of two.
 
-use crate::continuity::{require_neighbours, ContinuityInPipeline};
-use crate::neighbour_grid::Neighbours;
 use crate::packed::{with_packed, Fill, Packed};
 use crate::pair_x8::WendlandX8;
 use glam::DVec2;
@@ -19,6 +17,7 @@ use sph_core::components::{Acceleration, DensityRate, Fluid};
 use sph_core::kernel::Kernel;
 use sph_core::sim::{whole_pow, Sim};
 use sph_core::stage::{SetupError, Stage, StepError};
+use sph_core::vocab::{require_neighbours, ContinuityInPipeline, Neighbours, ViscousDissipation};
 use sph_core::world::{ensure_component, Particles};
 use sph_core::{with_kernel, StageRegistry};
 
@@ -93,14 +92,6 @@ pub struct Forces {
     /// between steps; the total adds them in chunk order, so it is the same for any
     /// thread count.
     dissipation: Vec<f64>,
-}
-
-/// Work dissipated by the artificial viscosity: the forces stage stores its rate here
-/// each step when a stage that reports energy has asked for it (by inserting it).
-#[derive(Debug, Default, Clone, Copy)]
-pub struct ViscousDissipation {
-    /// Rate of dissipation this step [W per metre of depth].
-    pub power: f64,
 }
 
 impl Stage for Forces {

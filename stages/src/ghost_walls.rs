@@ -18,9 +18,9 @@ use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure, Velocity, Wall};
-use sph_core::motion::Pose;
-use sph_core::sim::{Sim, Tait};
+use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
+use sph_core::vocab::{ghost_density, GhostSettings};
 use sph_core::walls::{WallLine, WallSet};
 use sph_core::world::{archetype, column, column_mut, count};
 use sph_core::StageRegistry;
@@ -67,16 +67,6 @@ pub fn register(registry: &mut StageRegistry) {
             })
         },
     );
-}
-
-/// Ghost settings later stages need to refresh ghost densities.
-#[derive(Clone, Debug, Default)]
-pub struct GhostSettings {
-    pub hydrostatic: bool,
-    /// Each wall's body pose when the ghosts were placed (the tank's, or a piston's).
-    pub poses: Vec<Pose>,
-    /// The wall each ghost was (first) mirrored across, in ghost order.
-    pub wall_of_ghost: Vec<u16>,
 }
 
 pub struct GhostWalls {
@@ -263,24 +253,6 @@ fn mirror_velocity(line: &WallLine, w: &Wall, x: DVec2, v: DVec2, slip: Slip) ->
     }
 }
 
-/// Ghost density: the source's, or with the hydrostatic correction the density whose
-/// pressure is p_source + rho_0 (g - a_w) . (x_ghost - x_source), a_w the acceleration
-/// at the source of the body (tank or piston) whose wall it was mirrored across.
-fn ghost_density(
-    rho_source: f64,
-    source: DVec2,
-    ghost: DVec2,
-    correction: Option<((Tait, DVec2), Pose)>,
-) -> f64 {
-    match correction {
-        Some(((eos, g), pose)) => {
-            let g_eff = g - pose.acceleration_at(source);
-            eos.density(eos.pressure(rho_source) + eos.rho0 * g_eff.dot(ghost - source))
-        }
-        None => rho_source,
-    }
-}
-
 /// Brings the ghost pool to `needed` entities: spawns the shortfall or despawns the
 /// surplus from the end of the archetype (which keeps the others' order).
 fn resize_pool(world: &mut hecs::World, needed: usize) {
@@ -307,36 +279,4 @@ fn resize_pool(world: &mut hecs::World, needed: usize) {
             let _ = world.despawn(e);
         }
     }
-}
-
-/// Re-copies every ghost's density from its source (after a stage changed the fluid
-/// densities, e.g. re-initialisation), with the hydrostatic correction if enabled.
-pub fn refresh_ghost_density(sim: &Sim) -> Result<(), StepError> {
-    let (Some(fluid), Some(ghost)) = (
-        archetype::<Fluid>(&sim.world),
-        archetype::<Ghost>(&sim.world),
-    ) else {
-        return Ok(());
-    };
-    let settings = sim
-        .resources
-        .get::<GhostSettings>()
-        .filter(|s| s.hydrostatic);
-    let eos_g = (sim.constants.eos, sim.constants.gravity);
-    let (fx, fr) = (column::<Position>(fluid)?, column::<Density>(fluid)?);
-    let (gs, gx) = (column::<Ghost>(ghost)?, column::<Position>(ghost)?);
-    let mut gr = column_mut::<Density>(ghost)?;
-    let (fx, fr): (&[Position], &[Density]) = (&fx, &fr);
-    (&mut gr[..], &gs[..], &gx[..])
-        .into_par_iter()
-        .enumerate()
-        .for_each(|(k, (rho, g, x))| {
-            let s = g.source as usize;
-            let body = settings.and_then(|st| {
-                let wall = *st.wall_of_ghost.get(k)? as usize;
-                st.poses.get(wall).copied()
-            });
-            rho.0 = ghost_density(fr[s].0, fx[s].0, x.0, body.map(|b| (eos_g, b)));
-        });
-    Ok(())
 }

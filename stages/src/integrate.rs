@@ -15,6 +15,7 @@ use sph_core::checkpoint::{get_column, put_column, Dec, Enc};
 use sph_core::components::{Acceleration, Density, DensityRate, Fluid, Position, Velocity};
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
+use sph_core::vocab::{HalfDensity, HalfVelocity};
 use sph_core::walls::WallSet;
 use sph_core::world::{archetype, column_mut, ensure_component};
 use sph_core::StageRegistry;
@@ -116,15 +117,6 @@ pub fn register(registry: &mut StageRegistry) {
         },
     );
 }
-
-/// v at the last half step (leapfrog state).
-#[derive(Clone, Copy, Debug, Default)]
-pub struct HalfVelocity(pub DVec2);
-/// rho at the last half step (leapfrog state).
-#[derive(Clone, Copy, Debug, Default)]
-pub struct HalfDensity(pub f64);
-
-sph_core::checkpoint_newtype!(HalfVelocity(DVec2), HalfDensity(f64));
 
 pub struct Integrate {
     params: Params,

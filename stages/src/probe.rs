@@ -26,7 +26,6 @@
 //! on the walls without needing a wall integration; at rest it is the moment of the
 //! liquid's weight.
 
-use crate::neighbour_grid::Neighbours;
 use glam::DVec2;
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
@@ -40,6 +39,7 @@ use sph_core::piston::PISTON_WALL;
 use sph_core::series::SeriesWriter;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
+use sph_core::vocab::Neighbours;
 use sph_core::walls::WallSet;
 use sph_core::world::{archetype, column, Particles};
 use sph_core::StageRegistry;

@@ -5,11 +5,7 @@
 //! density field and so does not lift a free surface when run often.
 //! Run it every N steps with the stage's `every: N`; leave the stage out for "never".
 
-use crate::continuity::require_neighbours;
-use crate::ghost_walls::refresh_ghost_density;
-use crate::integrate::HalfDensity;
 use crate::mls::MlsSums;
-use crate::neighbour_grid::Neighbours;
 use crate::packed::{with_packed, Fill, Packed};
 use crate::pair_x8::WendlandX8;
 use rayon::prelude::*;
@@ -18,6 +14,7 @@ use sph_core::components::Density;
 use sph_core::kernel::Kernel;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
+use sph_core::vocab::{refresh_ghost_density, require_neighbours, HalfDensity, Neighbours};
 use sph_core::{with_kernel, StageRegistry};
 
 /// The density filter.

@@ -20,6 +20,7 @@ pub mod sim;
 pub mod stage;
 pub mod study;
 pub mod sweep;
+pub mod vocab;
 pub mod walls;
 pub mod waves;
 pub mod world;
