@@ -17,11 +17,13 @@
 use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure, Velocity, Wall};
+use sph_core::components::{
+    Density, Fluid, Ghost, Mass, MirrorWall, Position, Pressure, Velocity, WallPose,
+};
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{ghost_density, GhostSettings};
-use sph_core::walls::{WallLine, WallSet};
+use sph_core::walls::{WallLine, Walls};
 use sph_core::world::{archetype, column, column_mut, count};
 use sph_core::StageRegistry;
 
@@ -60,8 +62,7 @@ pub fn register(registry: &mut StageRegistry) {
         |p: Params| {
             Ok(GhostWalls {
                 params: p,
-                walls: WallSet::default(),
-                corners: Vec::new(),
+                walls: Walls::default(),
                 images: Vec::new(),
                 chunks: Vec::new(),
             })
@@ -71,9 +72,9 @@ pub fn register(registry: &mut StageRegistry) {
 
 pub struct GhostWalls {
     params: Params,
-    walls: WallSet,
-    /// Pairs of walls sharing an end point: their corner gets double mirrors.
-    corners: Vec<(usize, usize)>,
+    /// The walls as the world holds them, re-read every step (a reused buffer); the
+    /// pairs of walls sharing an end point (its corners) get double mirrors.
+    walls: Walls,
     /// This step's ghosts, and the per-chunk lists they are gathered from (both kept
     /// between steps: no per-step allocation once they have reached their size).
     images: Vec<Image>,
@@ -104,37 +105,23 @@ impl Stage for GhostWalls {
     }
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
-        self.walls = WallSet::from_world(&sim.world);
+        self.walls.read(&sim.world);
         if self.walls.is_empty() {
             return Err(SetupError::new(
                 "ghost_walls",
                 "the scenario has no walls; remove GhostWalls() or add a `tank` or `walls`",
             ));
         }
-        // Walls meet where an end of one lies on the other (a corner, or a piston
-        // standing on the floor).
-        self.corners = self
-            .walls
-            .corners()
-            .iter()
-            .map(|c| (c.first, c.second))
-            .collect();
         sim.resources.insert(GhostSettings {
             hydrostatic: self.params.hydrostatic,
-            ..GhostSettings::default()
         });
         Ok(())
     }
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
-        self.walls.at(sim.clock.time);
+        // The walls where the world has them now (the scene moves with the clock).
+        self.walls.read(&sim.world);
         self.find_images(sim)?;
-        if let Some(s) = sim.resources.get_mut::<GhostSettings>() {
-            s.poses.clear();
-            s.poses.extend(self.walls.now().iter().map(|w| w.body));
-            s.wall_of_ghost.clear();
-            s.wall_of_ghost.extend(self.images.iter().map(|i| i.first));
-        }
         let images = &self.images[..];
         resize_pool(&mut sim.world, images.len());
         let Some(fluid) = archetype::<Fluid>(&sim.world) else {
@@ -145,7 +132,10 @@ impl Stage for GhostWalls {
         };
         let (fx, fv) = (column::<Position>(fluid)?, column::<Velocity>(fluid)?);
         let (fr, fm) = (column::<Density>(fluid)?, column::<Mass>(fluid)?);
-        let mut gs = column_mut::<Ghost>(ghost)?;
+        let (mut gs, mut gw) = (
+            column_mut::<Ghost>(ghost)?,
+            column_mut::<MirrorWall>(ghost)?,
+        );
         let (mut gx, mut gv) = (
             column_mut::<Position>(ghost)?,
             column_mut::<Velocity>(ghost)?,
@@ -158,9 +148,10 @@ impl Stage for GhostWalls {
             .hydrostatic
             .then_some((sim.constants.eos, sim.constants.gravity));
         let (walls, lines) = (self.walls.now(), self.walls.lines());
+        let entities = self.walls.entities();
         let slip = self.params.slip;
         (
-            &mut gs[..],
+            (&mut gs[..], &mut gw[..]),
             &mut gx[..],
             &mut gv[..],
             &mut gr[..],
@@ -168,7 +159,7 @@ impl Stage for GhostWalls {
             images,
         )
             .into_par_iter()
-            .for_each(|(g, x, v, rho, m, img)| {
+            .for_each(|((g, wall), x, v, rho, m, img)| {
                 let s = img.source as usize;
                 let (mut pos, mut vel) = (fx[s].0, fv[s].0);
                 for k in std::iter::once(img.first).chain(img.second) {
@@ -177,6 +168,7 @@ impl Stage for GhostWalls {
                     pos = lines[k].mirror(pos);
                 }
                 *g = Ghost { source: img.source };
+                *wall = MirrorWall(entities[img.first as usize]);
                 x.0 = pos;
                 v.0 = vel;
                 m.0 = fm[s].0;
@@ -199,7 +191,7 @@ impl GhostWalls {
         let support = sim.constants.support();
         let on_wall = ON_WALL * sim.constants.spacing;
         let lines = self.walls.lines();
-        let corners = &self.corners;
+        let corners = self.walls.corners();
         // A particle on the wall (closer than `on_wall`) is its own mirror image: a
         // ghost there would count its mass twice for its neighbours.
         let near = |w: &WallLine, x: DVec2| {
@@ -224,7 +216,8 @@ impl GhostWalls {
                             });
                         }
                     }
-                    for &(a, b) in corners {
+                    for c in corners {
+                        let (a, b) = (c.first, c.second);
                         if near(&lines[a], x.0) && near(&lines[b], x.0) {
                             out.push(Image {
                                 source,
@@ -244,7 +237,7 @@ impl GhostWalls {
 
 /// Velocity of the ghost of a particle at `x` moving at `v`, mirrored across wall `w`
 /// (`line` its geometry) relative to the wall's velocity at the particle's foot on it.
-fn mirror_velocity(line: &WallLine, w: &Wall, x: DVec2, v: DVec2, slip: Slip) -> DVec2 {
+fn mirror_velocity(line: &WallLine, w: &WallPose, x: DVec2, v: DVec2, slip: Slip) -> DVec2 {
     let n = line.normal;
     let vw = w.velocity_at(x - line.distance(x) * n);
     match slip {
@@ -266,6 +259,7 @@ fn resize_pool(world: &mut hecs::World, needed: usize) {
                 Density(1.0),
                 Pressure(0.0),
                 Mass(0.0),
+                MirrorWall::default(),
             )
         }));
     } else if needed < have {

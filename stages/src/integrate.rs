@@ -16,7 +16,7 @@ use sph_core::components::{Acceleration, Density, DensityRate, Fluid, Position, 
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{HalfDensity, HalfVelocity};
-use sph_core::walls::WallSet;
+use sph_core::walls::Walls;
 use sph_core::world::{archetype, column_mut, ensure_component};
 use sph_core::StageRegistry;
 
@@ -110,7 +110,7 @@ pub fn register(registry: &mut StageRegistry) {
             Ok(Integrate {
                 params: p,
                 first_dt: None,
-                walls: WallSet::default(),
+                walls: Walls::default(),
                 zero_a: Vec::new(),
                 zero_r: Vec::new(),
             })
@@ -121,8 +121,9 @@ pub fn register(registry: &mut StageRegistry) {
 pub struct Integrate {
     params: Params,
     first_dt: Option<f64>,
-    /// Walls where they are at the end of the step.
-    walls: WallSet,
+    /// The walls where the world has them at the end of the step (the clock's advance
+    /// moves them), re-read every step (a reused buffer).
+    walls: Walls,
     /// Zero rates for a pipeline without forces or continuity.
     zero_a: Vec<Acceleration>,
     zero_r: Vec<DensityRate>,
@@ -136,12 +137,11 @@ impl Stage for Integrate {
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         ensure_component::<Fluid, HalfVelocity>(sim);
         ensure_component::<Fluid, HalfDensity>(sim);
-        self.walls = WallSet::from_world(&sim.world);
         Ok(())
     }
 
     /// The first step (the collapse reference) and the half-step columns; the walls
-    /// follow from the time.
+    /// follow the clock.
     fn save_state(&mut self, sim: &Sim) -> Result<Vec<u8>, StepError> {
         let mut e = Enc::default();
         e.opt_f64(self.first_dt);
@@ -223,10 +223,10 @@ impl Stage for Integrate {
         } else {
             0.5 * (sim.clock.dt + dt)
         };
-        sim.clock.dt = dt;
-        sim.clock.time += dt;
-        sim.clock.step += 1;
-        self.walls.at(sim.clock.time);
+        // The clock advances, and the scene with it: the walls where they are at the
+        // end of the step, which is where the particles are checked against them.
+        sim.clock.advance(dt, &sim.world);
+        self.walls.read(&sim.world);
         let reflect = self.params.reflect_at_walls;
         let floor = if self.params.restore_density_on_reflection {
             c.eos.rho0
@@ -340,7 +340,10 @@ impl Integrate {
         let what = if !p.is_finite() || !r.is_finite() {
             "non-finite position or density".to_string()
         } else if let Some(w) = self.walls.crossed(p, sim.constants.support()) {
-            format!("particle passed through {}", self.walls.describe(w))
+            format!(
+                "particle passed through {}",
+                self.walls.describe(&sim.world, w)
+            )
         } else if p.cmplt(lo).any() || p.cmpgt(hi).any() {
             "particle left the domain".to_string()
         } else {

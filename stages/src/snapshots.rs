@@ -8,7 +8,7 @@ use sph_core::components::{Position, Pressure};
 use sph_core::output::png::{write_snapshot, Snapshot};
 use sph_core::sim::Sim;
 use sph_core::stage::{Stage, StepError};
-use sph_core::walls::WallSet;
+use sph_core::walls::Walls;
 use sph_core::world::Particles;
 use sph_core::StageRegistry;
 
@@ -124,10 +124,12 @@ impl Stage for Snapshots {
             .map(|(q, p)| (q.0, p.0))
             .filter(|(q, _)| inside(q))
             .unzip();
-        // Walls where they are now (a rolling tank's walls move).
-        let mut set = WallSet::from_world(&sim.world);
-        let walls: Vec<(DVec2, DVec2)> =
-            set.at(sim.clock.time).iter().map(|w| (w.a, w.b)).collect();
+        // Walls where the world has them now (a rolling tank's walls move).
+        let walls: Vec<(DVec2, DVec2)> = Walls::of(&sim.world)
+            .now()
+            .iter()
+            .map(|w| (w.a, w.b))
+            .collect();
         // The requested region, or everything: walls and particles.
         let (lo, hi) = match self.params.region {
             Some(((x0, y0), (x1, y1))) => (DVec2::new(x0, y0), DVec2::new(x1, y1)),

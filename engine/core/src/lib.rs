@@ -6,6 +6,7 @@ pub mod checkpoint;
 pub mod components;
 pub mod frame;
 pub mod kernel;
+pub mod kinematics;
 pub mod linear_sloshing;
 pub mod motion;
 pub mod output;

@@ -453,6 +453,8 @@ fn restore(
     sim.clock.time = d.f64()?;
     sim.clock.dt = d.f64()?;
     sim.clock.step = d.u64()?;
+    // The scene follows the clock: walls and pistons where they were at that time.
+    crate::kinematics::place(&sim.world, sim.clock.time);
     *ghost_sum = d.f64()?;
     let n = d.len(16)?;
     sim.diagnostics.clear();

@@ -6,7 +6,7 @@
 //! RON, unknown stage or field, wrong type, out-of-range value — carries
 //! `file:line:column`, the field and what would be accepted.
 
-use crate::components::{Density, Position, Pressure, Velocity, Wall};
+use crate::components::{BodyPose, Density, Position, Pressure, Velocity, Wall};
 use crate::components::{Fluid, Mass, ParticleId, PressureSensor, Tank, WaveGauge};
 use crate::kernel::KernelKind;
 use crate::motion::{Motion, MotionSeries, MotionSpec, Pose};
@@ -725,19 +725,40 @@ impl Scenario {
                 height: t.height.0,
                 pivot: t.pivot(),
             };
+            let pose = BodyPose(Pose::at_rest(tank.pivot));
             match &self.motion {
-                Some(m) => world.spawn((tank, m.clone())),
-                None => world.spawn((tank,)),
+                Some(m) => world.spawn((tank, pose, m.clone())),
+                None => world.spawn((tank, pose)),
             };
         }
-        let walls = self.walls();
+        // Walls in list order (tank walls, extra walls, the piston), each with its pose
+        // now; the piston also carries its own motion and the `Piston` marker.
+        let mut wall_entities = Vec::new();
+        for w in self.walls() {
+            let name = w.name.clone();
+            let now = w.at_rest();
+            let entity = match (&self.piston, w.name == PISTON_WALL) {
+                (Some(m), true) => {
+                    let body = BodyPose(w.body);
+                    world.spawn((w, now, Piston, body, m.clone()))
+                }
+                _ => world.spawn((w, now)),
+            };
+            wall_entities.push((name, entity));
+        }
         for s in &self.spec.pressure_sensors {
-            let wall = walls.iter().position(|w| w.name == s.wall).unwrap_or(0);
+            // Validated: the sensor's wall exists.
+            let Some(&(_, wall)) = wall_entities.iter().find(|(name, _)| *name == s.wall) else {
+                continue;
+            };
+            let along = world
+                .get::<&Wall>(wall)
+                .map_or(0.0, |w| w.abscissa(s.at.into()));
             let width = s.width.map_or(2.0 * self.h, |w| w.0);
             world.spawn((PressureSensor {
                 name: s.name.clone(),
                 wall,
-                along: walls[wall].abscissa(s.at.into()),
+                along,
                 width,
             },));
         }
@@ -747,12 +768,8 @@ impl Scenario {
                 x: g.x,
             },));
         }
-        for w in walls {
-            match (&self.piston, w.name == PISTON_WALL) {
-                (Some(m), true) => world.spawn((w, Piston, m.clone())),
-                _ => world.spawn((w,)),
-            };
-        }
+        // Everything where its motion has it at t = 0.
+        crate::kinematics::place(&world, 0.0);
         Sim {
             world,
             clock: Clock {

@@ -19,7 +19,7 @@
 //! [`crate::components`]; the walls, the tank and pistons, as the world holds them, in
 //! [`crate::components`] and [`crate::walls`].
 
-use crate::components::{Density, Fluid, Ghost, Position};
+use crate::components::{Density, Fluid, Ghost, MirrorWall, Position, WallPose};
 use crate::motion::Pose;
 use crate::sim::{Sim, Tait};
 use crate::stage::{SetupError, StepError};
@@ -232,14 +232,13 @@ pub struct ViscousDissipation {
 /// write it too).
 pub struct ContinuityInPipeline;
 
-/// Ghost settings later stages need to refresh ghost densities.
+/// How the ghost-wall stage sets ghost densities, for a later stage that refreshes
+/// them ([`refresh_ghost_density`]). What each ghost needs is on the ghost: its source
+/// (`Ghost`) and the wall it was mirrored across ([`MirrorWall`]).
 #[derive(Clone, Debug, Default)]
 pub struct GhostSettings {
+    /// The hydrostatic correction is on.
     pub hydrostatic: bool,
-    /// Each wall's body pose when the ghosts were placed (the tank's, or a piston's).
-    pub poses: Vec<Pose>,
-    /// The wall each ghost was (first) mirrored across, in ghost order.
-    pub wall_of_ghost: Vec<u16>,
 }
 
 /// Ghost density: the source's, or with the hydrostatic correction the density whose
@@ -262,7 +261,9 @@ pub fn ghost_density(
 }
 
 /// Re-copies every ghost's density from its source (after a stage changed the fluid
-/// densities, e.g. re-initialisation), with the hydrostatic correction if enabled.
+/// densities, e.g. re-initialisation), with the hydrostatic correction if enabled: the
+/// acceleration is that of the body whose wall the ghost was mirrored across, as the
+/// world holds it now (the walls have not moved since the ghosts were placed this step).
 pub fn refresh_ghost_density(sim: &Sim) -> Result<(), StepError> {
     let (Some(fluid), Some(ghost)) = (
         archetype::<Fluid>(&sim.world),
@@ -270,23 +271,39 @@ pub fn refresh_ghost_density(sim: &Sim) -> Result<(), StepError> {
     ) else {
         return Ok(());
     };
-    let settings = sim
+    let hydrostatic = sim
         .resources
         .get::<GhostSettings>()
-        .filter(|s| s.hydrostatic);
+        .is_some_and(|s| s.hydrostatic);
+    // The few walls' body poses, looked up by entity for each ghost.
+    let poses: Vec<(hecs::Entity, Pose)> = if hydrostatic {
+        sim.world
+            .query::<(hecs::Entity, &WallPose)>()
+            .iter()
+            .map(|(e, w)| (e, w.body))
+            .collect()
+    } else {
+        Vec::new()
+    };
     let eos_g = (sim.constants.eos, sim.constants.gravity);
     let (fx, fr) = (column::<Position>(fluid)?, column::<Density>(fluid)?);
     let (gs, gx) = (column::<Ghost>(ghost)?, column::<Position>(ghost)?);
+    let walls = if hydrostatic {
+        Some(column::<MirrorWall>(ghost)?)
+    } else {
+        None
+    };
     let mut gr = column_mut::<Density>(ghost)?;
     let (fx, fr): (&[Position], &[Density]) = (&fx, &fr);
+    let walls: Option<&[MirrorWall]> = walls.as_deref();
     (&mut gr[..], &gs[..], &gx[..])
         .into_par_iter()
         .enumerate()
         .for_each(|(k, (rho, g, x))| {
             let s = g.source as usize;
-            let body = settings.and_then(|st| {
-                let wall = *st.wall_of_ghost.get(k)? as usize;
-                st.poses.get(wall).copied()
+            let body = walls.and_then(|w| {
+                let wall = w[k].0;
+                poses.iter().find(|(e, _)| *e == wall).map(|p| p.1)
             });
             rho.0 = ghost_density(fr[s].0, fx[s].0, x.0, body.map(|b| (eos_g, b)));
         });
