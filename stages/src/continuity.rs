@@ -5,7 +5,8 @@ use crate::packed::{with_packed, Fill};
 use crate::pair_x8::WendlandX8;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use sph_core::components::{DensityRate, Fluid};
+use sph_core::components::{DensityRate, Fluid, Mass, Position, Velocity};
+use sph_core::contract::Access;
 use sph_core::kernel::Kernel;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
@@ -70,5 +71,15 @@ impl Stage for Continuity {
             Ok(())
         })?;
         Ok(())
+    }
+
+    /// The density rate from the neighbours' velocities.
+    fn access(&self) -> Access {
+        Access::new()
+            .reads::<Neighbours>()
+            .reads::<Position>()
+            .reads::<Velocity>()
+            .reads::<Mass>()
+            .writes::<DensityRate>()
     }
 }

@@ -14,6 +14,7 @@
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::components::{Fluid, Position, Velocity};
+use sph_core::contract::Access;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::HalfVelocity;
@@ -97,5 +98,13 @@ impl Stage for DampingZone {
                 }
             });
         Ok(())
+    }
+
+    /// Damps the velocities Integrate produced, in place.
+    fn access(&self) -> Access {
+        Access::new()
+            .reads::<Position>()
+            .updates::<Velocity>()
+            .updates::<HalfVelocity>()
     }
 }

@@ -9,6 +9,7 @@
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::{Density, Mass, Position, Velocity};
+use sph_core::contract::Access;
 use sph_core::series::SeriesWriter;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
@@ -151,5 +152,15 @@ impl Stage for Energy {
             )?;
         }
         Ok(())
+    }
+
+    /// The energies of the fluid state; the dissipation rate when a stage writes it.
+    fn access(&self) -> Access {
+        Access::new()
+            .reads::<Position>()
+            .reads::<Velocity>()
+            .reads::<Density>()
+            .reads::<Mass>()
+            .uses::<ViscousDissipation>()
     }
 }

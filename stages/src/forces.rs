@@ -13,11 +13,16 @@ use crate::pair_x8::WendlandX8;
 use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use sph_core::components::{Acceleration, DensityRate, Fluid};
+use sph_core::components::{
+    Acceleration, Density, DensityRate, Fluid, Mass, Position, Pressure, Velocity,
+};
+use sph_core::contract::Access;
 use sph_core::kernel::Kernel;
 use sph_core::sim::{whole_pow, Sim};
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{require_neighbours, ContinuityInPipeline, Neighbours, ViscousDissipation};
+use sph_core::vocab::{
+    require_neighbours, ArtificialViscosity, ContinuityInPipeline, Neighbours, ViscousDissipation,
+};
 use sph_core::world::{ensure_component, Particles};
 use sph_core::{with_kernel, StageRegistry};
 
@@ -126,6 +131,25 @@ impl Stage for Forces {
             d.power = power;
         }
         Ok(())
+    }
+
+    /// Accelerations (and, with `with_continuity`, the density rate) from the
+    /// neighbours' state; exposes its artificial viscosity.
+    fn access(&self) -> Access {
+        Access::new()
+            .reads::<Neighbours>()
+            .reads::<Position>()
+            .reads::<Velocity>()
+            .reads::<Density>()
+            .reads::<Pressure>()
+            .reads::<Mass>()
+            .writes::<Acceleration>()
+            .writes_if::<DensityRate>(self.params.with_continuity)
+            .writes::<ViscousDissipation>()
+            .exposes(ArtificialViscosity {
+                alpha: self.params.alpha,
+                beta: self.params.beta,
+            })
     }
 }
 

@@ -20,6 +20,7 @@ use serde::{Deserialize, Serialize};
 use sph_core::components::{
     Density, Fluid, Ghost, Mass, MirrorWall, Position, Pressure, Velocity, WallPose,
 };
+use sph_core::contract::Access;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{ghost_density, GhostSettings};
@@ -176,6 +177,21 @@ impl Stage for GhostWalls {
                 rho.0 = ghost_density(fr[s].0, fx[s].0, pos, correction.map(|c| (c, body)));
             });
         Ok(())
+    }
+
+    /// Mirrors the fluid's positions, velocities, densities and masses across the
+    /// walls where the world has them: writes the ghost particles (with the wall each
+    /// was mirrored across) and the ghost settings.
+    fn access(&self) -> Access {
+        Access::new()
+            .reads::<Position>()
+            .reads::<Velocity>()
+            .reads::<Density>()
+            .reads::<Mass>()
+            .reads::<WallPose>()
+            .writes::<Ghost>()
+            .writes::<MirrorWall>()
+            .writes::<GhostSettings>()
     }
 }
 

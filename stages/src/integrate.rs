@@ -12,8 +12,11 @@ use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{get_column, put_column, Dec, Enc};
-use sph_core::components::{Acceleration, Density, DensityRate, Fluid, Position, Velocity};
-use sph_core::sim::Sim;
+use sph_core::components::{
+    Acceleration, BodyPose, Density, DensityRate, Fluid, Position, Velocity, WallPose,
+};
+use sph_core::contract::Access;
+use sph_core::sim::{Clock, Sim};
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{HalfDensity, HalfVelocity};
 use sph_core::walls::Walls;
@@ -291,6 +294,26 @@ impl Stage for Integrate {
             Some(i) => Err(self.diagnose(sim, i, x[i].0, rho[i].0)),
             None => Ok(()),
         }
+    }
+
+    /// Advances the fluid state and the clock (and with it the scene: the walls' and
+    /// bodies' poses); integrates with zero rates when no stage writes them.
+    fn access(&self) -> Access {
+        Access::new()
+            .reads::<Position>()
+            .reads::<Velocity>()
+            .reads::<Density>()
+            .reads::<WallPose>()
+            .uses::<Acceleration>()
+            .uses::<DensityRate>()
+            .writes::<Clock>()
+            .writes::<WallPose>()
+            .writes::<BodyPose>()
+            .writes::<Position>()
+            .writes::<Velocity>()
+            .writes::<Density>()
+            .writes::<HalfVelocity>()
+            .writes::<HalfDensity>()
     }
 }
 

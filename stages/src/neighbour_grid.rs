@@ -14,6 +14,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::{Fluid, Ghost, NeighbourCount, Position};
+use sph_core::contract::Access;
 use sph_core::sim::Sim;
 use sph_core::stage::{Stage, StepError};
 use sph_core::vocab::{resize_by_eighths, CellGrid, NeighbourBlock, Neighbours, BLOCK, REACH};
@@ -144,6 +145,16 @@ impl Stage for NeighbourGrid {
         let result = self.build(sim, &mut nb);
         sim.resources.insert(nb);
         result
+    }
+
+    /// Lists every fluid particle's neighbours among fluid and ghosts (the periodic
+    /// cell sort reorders the fluid columns; it changes no value).
+    fn access(&self) -> Access {
+        Access::new()
+            .reads::<Position>()
+            .uses::<Ghost>()
+            .writes::<Neighbours>()
+            .writes_if::<NeighbourCount>(self.count)
     }
 }
 

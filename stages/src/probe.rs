@@ -30,9 +30,10 @@ use glam::DVec2;
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::{
-    Acceleration, Density, Fluid, Mass, NeighbourCount, Position, Pressure, PressureSensor, Tank,
-    Velocity, Wall, WallPose, WaveGauge,
+    Acceleration, BodyPose, Density, Fluid, Ghost, Mass, NeighbourCount, Position, Pressure,
+    PressureSensor, Tank, Velocity, Wall, WallPose, WaveGauge,
 };
+use sph_core::contract::Access;
 use sph_core::kernel;
 use sph_core::kinematics;
 use sph_core::motion::Pose;
@@ -341,6 +342,29 @@ impl Stage for Probe {
             )?;
         }
         Ok(())
+    }
+
+    /// Samples the fluid and the walls where the world has them; the neighbour grid
+    /// for Method I (when there are sensors) and the piston force.
+    fn access(&self) -> Access {
+        let shepard = self.params.methods.contains(&Method::Shepard);
+        let access = Access::new()
+            .reads::<Position>()
+            .reads::<Velocity>()
+            .reads::<Density>()
+            .reads::<Pressure>()
+            .reads::<Mass>()
+            .reads::<WallPose>()
+            .reads::<BodyPose>()
+            .reads_if::<Neighbours>(self.params.piston)
+            .reads_if::<NeighbourCount>(self.params.neighbours)
+            .reads_if::<Acceleration>(self.params.roll_moment)
+            .uses::<Ghost>();
+        if shepard && !self.params.piston {
+            access.uses::<Neighbours>()
+        } else {
+            access
+        }
     }
 }
 

@@ -10,11 +10,14 @@ use crate::packed::{with_packed, Fill, Packed};
 use crate::pair_x8::WendlandX8;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use sph_core::components::Density;
+use sph_core::components::{Density, Ghost, Mass, Position};
+use sph_core::contract::Access;
 use sph_core::kernel::Kernel;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{refresh_ghost_density, require_neighbours, HalfDensity, Neighbours};
+use sph_core::vocab::{
+    refresh_ghost_density, require_neighbours, GhostSettings, HalfDensity, Neighbours,
+};
 use sph_core::{with_kernel, StageRegistry};
 
 /// The density filter.
@@ -102,6 +105,19 @@ impl Stage for Reinitialise {
             return Ok(());
         }
         refresh_ghost_density(sim)
+    }
+
+    /// Filters the density in place (and shifts the half-step density and refreshes
+    /// the ghosts' densities when there are such).
+    fn access(&self) -> Access {
+        Access::new()
+            .reads::<Neighbours>()
+            .reads::<Position>()
+            .reads::<Mass>()
+            .updates::<Density>()
+            .uses::<HalfDensity>()
+            .uses::<Ghost>()
+            .uses::<GhostSettings>()
     }
 }
 

@@ -4,7 +4,8 @@
 use glam::DVec2;
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
-use sph_core::components::{Position, Pressure};
+use sph_core::components::{Position, Pressure, WallPose};
+use sph_core::contract::Access;
 use sph_core::output::png::{write_snapshot, Snapshot};
 use sph_core::sim::Sim;
 use sph_core::stage::{Stage, StepError};
@@ -160,5 +161,13 @@ impl Stage for Snapshots {
             width_px: self.params.width,
         };
         write_snapshot(&path, &snapshot).map_err(|e| StepError::output(&path, e))
+    }
+
+    /// Draws the fluid's pressures and the walls where the world has them.
+    fn access(&self) -> Access {
+        Access::new()
+            .reads::<Position>()
+            .reads::<Pressure>()
+            .reads::<WallPose>()
     }
 }

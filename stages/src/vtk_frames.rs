@@ -5,6 +5,8 @@
 
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
+use sph_core::components::{Density, NeighbourCount, Position, Pressure, Velocity, WallPose};
+use sph_core::contract::Access;
 use sph_core::frame::write_fluid_frame;
 use sph_core::output::vtk::{write_segments_vtp, PvdIndex};
 use sph_core::series::check_samples;
@@ -152,5 +154,16 @@ impl Stage for VtkFrames {
         }
         self.written += 1;
         Ok(())
+    }
+
+    /// Writes the fluid state and the walls where the world has them.
+    fn access(&self) -> Access {
+        Access::new()
+            .reads::<Position>()
+            .reads::<Velocity>()
+            .reads::<Density>()
+            .reads::<Pressure>()
+            .reads::<WallPose>()
+            .uses::<NeighbourCount>()
     }
 }

@@ -4,6 +4,7 @@
 
 pub mod checkpoint;
 pub mod components;
+pub mod contract;
 pub mod frame;
 pub mod kernel;
 pub mod kinematics;

@@ -248,12 +248,24 @@ fn run_in_pool(mut scenario: Scenario, opts: &RunOptions) -> Result<(Summary, Si
                 continue;
             }
             let t0 = Instant::now();
+            let clock = clock_bits(&sim);
             let result = {
                 let _span = tracing::info_span!("stage", name = entry.name.as_str()).entered();
                 entry.stage.run(&mut sim)
             };
             time.calls += 1;
             time.seconds += t0.elapsed().as_secs_f64();
+            // Only the stage that declares the clock among its writes may change it.
+            let result = result.and_then(|()| {
+                if clock_bits(&sim) == clock || entry.access().writes_clock() {
+                    Ok(())
+                } else {
+                    Err(StepError::Internal(format!(
+                        "stage `{}` changed the clock without declaring it (Stage::access); only the stage that advances the clock may",
+                        entry.name
+                    )))
+                }
+            });
             if let Err(error) = result {
                 failure = Some((entry.name.clone(), step, error));
                 break 'steps;
@@ -356,6 +368,12 @@ fn run_in_pool(mut scenario: Scenario, opts: &RunOptions) -> Result<(Summary, Si
         }),
         None => Ok((summary, sim)),
     }
+}
+
+/// The clock's time, step and dt, exactly (the end time is the run's, not the clock's).
+fn clock_bits(sim: &Sim) -> (u64, u64, u64) {
+    let c = &sim.clock;
+    (c.time.to_bits(), c.step, c.dt.to_bits())
 }
 
 /// Refuses checkpoint options that make no sense, before anything is written.

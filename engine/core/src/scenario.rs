@@ -8,6 +8,7 @@
 
 use crate::components::{BodyPose, Density, Position, Pressure, Velocity, Wall};
 use crate::components::{Fluid, Mass, ParticleId, PressureSensor, Tank, WaveGauge};
+use crate::contract::{Access, Breach};
 use crate::kernel::KernelKind;
 use crate::motion::{Motion, MotionSeries, MotionSpec, Pose};
 use crate::overrides::{apply_overrides, Override};
@@ -251,22 +252,15 @@ pub struct PipelineEntry {
     /// parameters; default 1).
     pub every: u32,
     pub stage: Box<dyn Stage>,
+    /// What the stage declared it reads and writes ([`Stage::access`], asked once).
+    access: Access,
     resolved: String,
 }
 
 impl PipelineEntry {
-    /// A numeric parameter of the stage as resolved (defaults filled in), e.g.
-    /// `forces`' `alpha`.
-    pub fn number(&self, key: &str) -> Option<f64> {
-        let value: ron::Value = ron::from_str(&self.resolved).ok()?;
-        let ron::Value::Map(map) = value else {
-            return None;
-        };
-        let found = map.iter().find_map(|(k, v)| match (k, v) {
-            (ron::Value::String(k), ron::Value::Number(n)) if k == key => Some(n.into_f64()),
-            _ => None,
-        });
-        found
+    /// The stage's declared contract.
+    pub fn access(&self) -> &Access {
+        &self.access
     }
 }
 
@@ -377,6 +371,7 @@ impl<'de> Visitor<'de> for ParamsVisitor<'_> {
         Ok(PipelineEntry {
             name: self.name,
             every,
+            access: built.stage.access(),
             stage: built.stage,
             resolved: built.resolved_params,
         })
@@ -567,6 +562,16 @@ impl Scenario {
             ),
             None => body,
         }
+    }
+
+    /// The value of type `T` a stage of the pipeline exposes ([`Access::exposes`]), e.g.
+    /// the artificial viscosity ([`crate::vocab::ArtificialViscosity`]): the first stage
+    /// in the list that exposes one.
+    pub fn exposed<T: std::any::Any>(&self) -> Option<&T> {
+        self.spec
+            .pipeline
+            .iter()
+            .find_map(|p| p.access.exposed::<T>())
     }
 
     /// Walls of the scenario: the tank's, the extra ones, then the piston.
@@ -983,33 +988,91 @@ fn validate(spec: ScenarioSpec, at: &Locator, source: PathBuf) -> Result<Scenari
             ));
         }
     }
-    if let Some((k, e)) = scenario
-        .spec
-        .pipeline
-        .iter()
-        .enumerate()
-        .find(|(_, e)| e.name == "integrate" && e.every != 1)
-    {
-        let place = at
-            .doc
-            .element(&["pipeline"], k, "every")
-            .or_else(|| at.doc.key(&["pipeline"]));
-        return Err(at.error(
-            "every",
-            place,
-            format!(
-                "Integrate(every: {}) would leave the clock standing on the other steps; accepted: Integrate runs every step (every: 1)",
-                e.every
-            ),
-        ));
-    }
     if scenario.spec.pipeline.is_empty() {
         return Err(at.field(
             "pipeline",
             "the pipeline is empty; list the stages to run".into(),
         ));
     }
+    check_contracts(&scenario.spec.pipeline, at)?;
     Ok(scenario)
+}
+
+/// The declared contracts over the whole pipeline ([`crate::contract::check`]), as an
+/// error placed at the offending stage's entry.
+fn check_contracts(pipeline: &[PipelineEntry], at: &Locator) -> Result<(), LoadError> {
+    let stages = pipeline.iter().map(|e| (&e.access, e.every));
+    let Err(breach) = crate::contract::check(stages) else {
+        return Ok(());
+    };
+    let entry = |k: usize| at.doc.element(&["pipeline"], k, "");
+    let name = |k: usize| camel_case(&pipeline[k].name);
+    let line = |k: usize| entry(k).map_or(0, |t| at.doc.line_col(t).0);
+    let (k, field, message) = match breach {
+        Breach::TwoWriters {
+            quantity,
+            first,
+            second,
+        } => (
+            Some(second),
+            "pipeline",
+            format!(
+                "{} writes `{}`, which {} (line {}) writes too; a quantity has one writer: remove one of them",
+                name(second),
+                quantity.name(),
+                name(first),
+                line(first)
+            ),
+        ),
+        Breach::Unwritten {
+            quantity,
+            reader,
+            update,
+            later,
+        } => {
+            let how = if update { "updates" } else { "reads" };
+            let fix = match later {
+                Some(w) => format!(
+                    "{} (line {}) writes it later in the step: put {} before {}",
+                    name(w),
+                    line(w),
+                    name(w),
+                    name(reader)
+                ),
+                None => format!(
+                    "no stage of the pipeline writes it: add the stage that does before {}",
+                    name(reader)
+                ),
+            };
+            (
+                Some(reader),
+                "pipeline",
+                format!(
+                    "{} {how} `{}`, which no stage before it writes; {fix}",
+                    name(reader),
+                    quantity.name()
+                ),
+            )
+        }
+        Breach::ClockNotEveryStep { stage, every } => {
+            let place = at.doc.element(&["pipeline"], stage, "every");
+            return Err(at.error(
+                "every",
+                place.or_else(|| at.doc.key(&["pipeline"])),
+                format!(
+                    "{0}(every: {every}) would leave the clock standing on the other steps; accepted: {0} runs every step (every: 1), as the stage that advances the clock",
+                    name(stage)
+                ),
+            ));
+        }
+        Breach::NoClock => (
+            None,
+            "pipeline",
+            "no stage advances the clock (none declares it among its writes): add Integrate() to the pipeline".into(),
+        ),
+    };
+    let place = k.and_then(entry).or_else(|| at.doc.key(&["pipeline"]));
+    Err(at.error(field, place, message))
 }
 
 /// The piston's motion, checked against the tank.

@@ -23,8 +23,9 @@ pub struct Clock {
 impl Clock {
     /// Takes a step of `dt`: the time advances by it, the step count by one, and the
     /// scene (tank, walls, pistons) moves to the new time ([`crate::kinematics`]), so
-    /// the world's wall poses always belong to `time`. Only the stage that advances
-    /// the clock (`Integrate`) calls this, once per step.
+    /// the world's wall poses always belong to `time`. Only the stage that declares the
+    /// clock among its writes ([`crate::contract::Quantity::clock`]; `Integrate`) calls
+    /// this, once per step.
     pub fn advance(&mut self, dt: f64, scene: &hecs::World) {
         self.dt = dt;
         self.time += dt;

@@ -10,6 +10,8 @@
 //!   damps the velocity.
 //! - [`ViscousDissipation`]: the artificial viscosity's dissipation rate, asked for by
 //!   `Energy` and filled in by `Forces`.
+//! - [`ArtificialViscosity`]: the viscosity coefficients the momentum stage exposes
+//!   (for a sweep's linear-theory damping).
 //! - [`ContinuityInPipeline`]: marks that a continuity stage writes the density rate.
 //! - [`GhostSettings`], [`refresh_ghost_density`]: how ghost densities follow their
 //!   sources (for a stage that changes fluid densities after the ghosts were placed).
@@ -226,6 +228,18 @@ crate::checkpoint_newtype!(HalfVelocity(DVec2), HalfDensity(f64));
 pub struct ViscousDissipation {
     /// Rate of dissipation this step [W per metre of depth].
     pub power: f64,
+}
+
+/// Monaghan's artificial viscosity coefficients a momentum stage runs with, exposed in
+/// its declared contract ([`crate::contract::Access::exposes`]): a sweep damps its
+/// linear-theory reference by the viscosity they imply
+/// ([`crate::Scenario::exposed`]).
+#[derive(Debug, Default, Clone, Copy, PartialEq)]
+pub struct ArtificialViscosity {
+    /// Linear coefficient alpha.
+    pub alpha: f64,
+    /// Quadratic coefficient beta.
+    pub beta: f64,
 }
 
 /// Marks that a `Continuity()` stage writes the density rate (so `Forces` refuses to
