@@ -17,14 +17,12 @@
 use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use sph_core::components::{
-    Density, Fluid, Ghost, Mass, MirrorWall, Position, Pressure, Velocity, WallPose,
-};
+use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure, Velocity};
 use sph_core::contract::Access;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{ghost_density, GhostSettings};
-use sph_core::walls::{WallLine, Walls};
+use sph_core::vocab::{ghost_density, GhostSettings, MirrorWall, WallPose, Walls};
+use sph_core::walls::WallLine;
 use sph_core::world::{archetype, column, column_mut, count};
 use sph_core::StageRegistry;
 

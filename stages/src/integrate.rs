@@ -12,14 +12,11 @@ use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{get_column, put_column, Dec, Enc};
-use sph_core::components::{
-    Acceleration, BodyPose, Density, DensityRate, Fluid, Position, Velocity, WallPose,
-};
+use sph_core::components::{Acceleration, Density, DensityRate, Fluid, Position, Velocity};
 use sph_core::contract::Access;
 use sph_core::sim::{Clock, Sim};
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{HalfDensity, HalfVelocity};
-use sph_core::walls::Walls;
+use sph_core::vocab::{BodyPose, HalfDensity, HalfVelocity, WallPose, Walls};
 use sph_core::world::{archetype, column_mut, ensure_component};
 use sph_core::StageRegistry;
 

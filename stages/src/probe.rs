@@ -30,18 +30,17 @@ use glam::DVec2;
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::{
-    Acceleration, BodyPose, Density, Fluid, Ghost, Mass, NeighbourCount, Position, Pressure,
-    PressureSensor, Tank, Velocity, Wall, WallPose, WaveGauge,
+    Acceleration, Density, Fluid, Ghost, Mass, NeighbourCount, Position, Pressure, PressureSensor,
+    Tank, Velocity, Wall, WaveGauge,
 };
 use sph_core::contract::Access;
 use sph_core::kernel;
 use sph_core::kinematics;
 use sph_core::motion::Pose;
-use sph_core::piston::Piston;
 use sph_core::series::SeriesWriter;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::Neighbours;
+use sph_core::vocab::{BodyPose, Neighbours, Piston, WallPose};
 use sph_core::world::{archetype, column, Particles};
 use sph_core::StageRegistry;
 

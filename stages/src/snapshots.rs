@@ -4,12 +4,12 @@
 use glam::DVec2;
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
-use sph_core::components::{Position, Pressure, WallPose};
+use sph_core::components::{Position, Pressure};
 use sph_core::contract::Access;
 use sph_core::output::png::{write_snapshot, Snapshot};
 use sph_core::sim::Sim;
 use sph_core::stage::{Stage, StepError};
-use sph_core::walls::Walls;
+use sph_core::vocab::{WallPose, Walls};
 use sph_core::world::Particles;
 use sph_core::StageRegistry;
 

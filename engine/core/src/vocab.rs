@@ -17,14 +17,21 @@
 //!   sources (for a stage that changes fluid densities after the ghosts were placed).
 //! - [`require_neighbours`]: the setup check of the stages that sum over neighbours.
 //!
-//! The particle components (`Position`, `Density`, ...) are in
-//! [`crate::components`]; the walls, the tank and pistons, as the world holds them, in
-//! [`crate::components`] and [`crate::walls`].
+//! - The scene as the world holds it, re-exported here: [`WallPose`] (each wall now),
+//!   [`BodyPose`] (the tank's and each piston's pose now), both written by the
+//!   kinematics when the clock advances; [`Walls`] (all walls at once, with their
+//!   lines and corners); [`MirrorWall`] (the wall a ghost was mirrored across);
+//!   [`Piston`] (the marker a stage finds the piston by).
+//!
+//! The particle components (`Position`, `Density`, ...) are in [`crate::components`].
 
-use crate::components::{Density, Fluid, Ghost, MirrorWall, Position, WallPose};
+pub use crate::components::{BodyPose, MirrorWall, WallPose};
+use crate::components::{Density, Fluid, Ghost, Position};
 use crate::motion::Pose;
+pub use crate::piston::Piston;
 use crate::sim::{Sim, Tait};
 use crate::stage::{SetupError, StepError};
+pub use crate::walls::Walls;
 use crate::world::{archetype, column, column_mut};
 use glam::DVec2;
 use rayon::prelude::*;
