@@ -416,7 +416,7 @@ impl Probe {
             sim.world
                 .get::<&WallPose>(e)
                 .map(|w| *w)
-                .map_err(|_| StepError::Internal("a sensor's wall is not in the world".into()))
+                .map_err(|_| StepError::Internal("a probed wall is not in the world".into()))
         };
         let mut row = Vec::new();
         for s in &self.sensors {
