@@ -3,13 +3,15 @@
 //! own. `Forces(terms: [..., Continuity()])` sums the same term in the forces' loop
 //! instead (one pass fewer), with the same result bit for bit.
 
-use crate::neighbour_grid::Neighbours;
 use crate::rates::{self, Outputs};
 use crate::terms::{continuity, RateTerms};
 use serde::{Deserialize, Serialize};
 use sph_core::components::{DensityRate, Fluid};
+use sph_core::contract::Access;
+use sph_core::pair::RateTerm;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
+use sph_core::vocab::require_neighbours;
 use sph_core::world::ensure_component;
 use sph_core::StageRegistry;
 
@@ -44,13 +46,7 @@ impl Stage for ContinuityStage {
     }
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
-        if !sim.resources.contains::<Neighbours>() {
-            return Err(SetupError::new(
-                "continuity",
-                "needs neighbour lists: put NeighbourGrid() before it in the pipeline",
-            ));
-        }
-        rates::claim_density_rate(sim, "continuity")?;
+        require_neighbours(sim, "continuity")?;
         ensure_component::<Fluid, DensityRate>(sim);
         Ok(())
     }
@@ -63,5 +59,9 @@ impl Stage for ContinuityStage {
             power: false,
         };
         rates::run(sim, &self.terms, out, &mut self.unused).map(|_| ())
+    }
+
+    fn access(&self) -> Access {
+        rates::declare_reads(Access::new(), self.terms.reads()).writes::<DensityRate>()
     }
 }

@@ -11,12 +11,13 @@
 //! resolution-dependent part of the wave, and it needs several wavelengths of flume.
 //! Sloping walls still work (any straight wall segment can be given in `walls`).
 
-use crate::integrate::HalfVelocity;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::components::{Fluid, Position, Velocity};
+use sph_core::contract::Access;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
+use sph_core::vocab::HalfVelocity;
 use sph_core::world::{archetype, column, column_mut};
 use sph_core::StageRegistry;
 
@@ -96,5 +97,13 @@ impl Stage for DampingZone {
                 }
             });
         Ok(())
+    }
+
+    /// Damps the velocities Integrate produced, in place.
+    fn access(&self) -> Access {
+        Access::new()
+            .reads::<Position>()
+            .updates::<Velocity>()
+            .updates::<HalfVelocity>()
     }
 }

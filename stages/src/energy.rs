@@ -6,13 +6,14 @@
 //! stage reported over the step just taken. Energy exchanged with the walls through the
 //! ghosts is not tracked, so `total` drifts by that work (a diagnostic, not a bug).
 
-use crate::forces::ViscousDissipation;
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc, Resuming};
 use sph_core::components::{Density, Mass, Position, Velocity};
+use sph_core::contract::Access;
 use sph_core::series::SeriesWriter;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
+use sph_core::vocab::ViscousDissipation;
 use sph_core::world::{sum_fixed, Particles};
 use sph_core::StageRegistry;
 
@@ -162,5 +163,15 @@ impl Stage for Energy {
             )?;
         }
         Ok(())
+    }
+
+    /// The energies of the fluid state; the dissipation rate when a stage writes it.
+    fn access(&self) -> Access {
+        Access::new()
+            .reads::<Position>()
+            .reads::<Velocity>()
+            .reads::<Density>()
+            .reads::<Mass>()
+            .uses::<ViscousDissipation>()
     }
 }

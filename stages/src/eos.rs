@@ -4,6 +4,7 @@
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::components::{Density, Fluid, Ghost, Pressure};
+use sph_core::contract::Access;
 use sph_core::sim::{Sim, Tait};
 use sph_core::stage::{Stage, StepError};
 use sph_core::world::{archetype, column, column_mut};
@@ -56,6 +57,14 @@ impl Stage for Eos {
             );
         }
         Ok(())
+    }
+
+    /// Pressure from density, for fluid and ghosts.
+    fn access(&self) -> Access {
+        Access::new()
+            .reads::<Density>()
+            .uses::<Ghost>()
+            .writes::<Pressure>()
     }
 }
 

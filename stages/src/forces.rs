@@ -5,13 +5,14 @@
 //! and, with the `Continuity()` term, d rho_i/dt = sum_j m_j v_ij . grad_i W_ij in the
 //! same loop (one pass over the neighbours instead of two).
 
-use crate::neighbour_grid::Neighbours;
 use crate::rates::{self, Outputs};
 use crate::terms::{artificial_viscosity, pressure_gradient, RateTerms, TermSpec};
 use serde::{Deserialize, Serialize};
 use sph_core::components::{Acceleration, DensityRate, Fluid};
+use sph_core::contract::Access;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
+use sph_core::vocab::{require_neighbours, ArtificialViscosity, ViscousDissipation};
 use sph_core::world::ensure_component;
 use sph_core::StageRegistry;
 
@@ -58,30 +59,16 @@ pub struct Forces {
     chunk_power: Vec<f64>,
 }
 
-/// Work dissipated by the viscous terms: the forces stage stores its rate here each
-/// step when a stage that reports energy has asked for it (by inserting it).
-#[derive(Debug, Default, Clone, Copy)]
-pub struct ViscousDissipation {
-    /// Rate of dissipation this step [W per metre of depth].
-    pub power: f64,
-}
-
 impl Stage for Forces {
     fn name(&self) -> &'static str {
         "forces"
     }
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
-        if !sim.resources.contains::<Neighbours>() {
-            return Err(SetupError::new(
-                "forces",
-                "needs neighbour lists: put NeighbourGrid() before it in the pipeline",
-            ));
-        }
+        require_neighbours(sim, "forces")?;
         self.terms = RateTerms::build(&self.params.terms, &sim.constants);
         ensure_component::<Fluid, Acceleration>(sim);
         if self.terms.continuity.is_some() {
-            rates::claim_density_rate(sim, "forces")?;
             ensure_component::<Fluid, DensityRate>(sim);
         }
         Ok(())
@@ -99,5 +86,28 @@ impl Stage for Forces {
             d.power = power;
         }
         Ok(())
+    }
+
+    fn access(&self) -> Access {
+        let terms = &self.params.terms;
+        let reads = terms
+            .iter()
+            .fold(Default::default(), |f, t| t.reads().with(f));
+        let continuity = terms.iter().any(|t| matches!(t, TermSpec::Continuity(_)));
+        let viscosity = terms.iter().find_map(|t| match t {
+            TermSpec::ArtificialViscosity(p) => Some(ArtificialViscosity {
+                alpha: p.alpha,
+                beta: p.beta,
+            }),
+            _ => None,
+        });
+        let access = rates::declare_reads(Access::new(), reads)
+            .writes::<Acceleration>()
+            .writes_if::<DensityRate>(continuity)
+            .writes::<ViscousDissipation>();
+        match viscosity {
+            Some(v) => access.exposes(v),
+            None => access,
+        }
     }
 }

@@ -17,11 +17,12 @@
 use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure, Velocity, Wall};
-use sph_core::motion::Pose;
-use sph_core::sim::{Sim, Tait};
+use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure, Velocity};
+use sph_core::contract::Access;
+use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::walls::{WallLine, WallSet};
+use sph_core::vocab::{ghost_density, GhostSettings, MirrorWall, WallPose, Walls};
+use sph_core::walls::WallLine;
 use sph_core::world::{archetype, column, column_mut, count};
 use sph_core::StageRegistry;
 
@@ -60,8 +61,7 @@ pub fn register(registry: &mut StageRegistry) {
         |p: Params| {
             Ok(GhostWalls {
                 params: p,
-                walls: WallSet::default(),
-                corners: Vec::new(),
+                walls: Walls::default(),
                 images: Vec::new(),
                 chunks: Vec::new(),
             })
@@ -69,21 +69,11 @@ pub fn register(registry: &mut StageRegistry) {
     );
 }
 
-/// Ghost settings later stages need to refresh ghost densities.
-#[derive(Clone, Debug, Default)]
-pub struct GhostSettings {
-    pub hydrostatic: bool,
-    /// Each wall's body pose when the ghosts were placed (the tank's, or a piston's).
-    pub poses: Vec<Pose>,
-    /// The wall each ghost was (first) mirrored across, in ghost order.
-    pub wall_of_ghost: Vec<u16>,
-}
-
 pub struct GhostWalls {
     params: Params,
-    walls: WallSet,
-    /// Pairs of walls sharing an end point: their corner gets double mirrors.
-    corners: Vec<(usize, usize)>,
+    /// The walls as the world holds them, re-read every step (a reused buffer); the
+    /// pairs of walls sharing an end point (its corners) get double mirrors.
+    walls: Walls,
     /// This step's ghosts, and the per-chunk lists they are gathered from (both kept
     /// between steps: no per-step allocation once they have reached their size).
     images: Vec<Image>,
@@ -114,38 +104,24 @@ impl Stage for GhostWalls {
     }
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
-        self.walls = WallSet::from_world(&sim.world);
+        self.walls.read(&sim.world);
         if self.walls.is_empty() {
             return Err(SetupError::new(
                 "ghost_walls",
                 "the scenario has no walls; remove GhostWalls() or add a `tank` or `walls`",
             ));
         }
-        // Walls meet where an end of one lies on the other (a corner, or a piston
-        // standing on the floor).
-        self.corners = self
-            .walls
-            .corners()
-            .iter()
-            .map(|c| (c.first, c.second))
-            .collect();
         sim.resources.insert(GhostSettings {
             hydrostatic: self.params.hydrostatic,
-            ..GhostSettings::default()
         });
         Ok(())
     }
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
-        self.walls.at(sim.clock.time);
+        // The walls where the world has them now (the scene moves with the clock).
+        self.walls.read(&sim.world);
         self.find_images(sim)?;
         let _span = tracing::info_span!("mirror").entered();
-        if let Some(s) = sim.resources.get_mut::<GhostSettings>() {
-            s.poses.clear();
-            s.poses.extend(self.walls.now().iter().map(|w| w.body));
-            s.wall_of_ghost.clear();
-            s.wall_of_ghost.extend(self.images.iter().map(|i| i.first));
-        }
         let images = &self.images[..];
         resize_pool(&mut sim.world, images.len());
         let Some(fluid) = archetype::<Fluid>(&sim.world) else {
@@ -156,7 +132,10 @@ impl Stage for GhostWalls {
         };
         let (fx, fv) = (column::<Position>(fluid)?, column::<Velocity>(fluid)?);
         let (fr, fm) = (column::<Density>(fluid)?, column::<Mass>(fluid)?);
-        let mut gs = column_mut::<Ghost>(ghost)?;
+        let (mut gs, mut gw) = (
+            column_mut::<Ghost>(ghost)?,
+            column_mut::<MirrorWall>(ghost)?,
+        );
         let (mut gx, mut gv) = (
             column_mut::<Position>(ghost)?,
             column_mut::<Velocity>(ghost)?,
@@ -169,9 +148,10 @@ impl Stage for GhostWalls {
             .hydrostatic
             .then_some((sim.constants.eos, sim.constants.gravity));
         let (walls, lines) = (self.walls.now(), self.walls.lines());
+        let entities = self.walls.entities();
         let slip = self.params.slip;
         (
-            &mut gs[..],
+            (&mut gs[..], &mut gw[..]),
             &mut gx[..],
             &mut gv[..],
             &mut gr[..],
@@ -179,7 +159,7 @@ impl Stage for GhostWalls {
             images,
         )
             .into_par_iter()
-            .for_each(|(g, x, v, rho, m, img)| {
+            .for_each(|((g, wall), x, v, rho, m, img)| {
                 let s = img.source as usize;
                 let (mut pos, mut vel) = (fx[s].0, fv[s].0);
                 for k in std::iter::once(img.first).chain(img.second) {
@@ -188,6 +168,7 @@ impl Stage for GhostWalls {
                     pos = lines[k].mirror(pos);
                 }
                 *g = Ghost { source: img.source };
+                *wall = MirrorWall(entities[img.first as usize]);
                 x.0 = pos;
                 v.0 = vel;
                 m.0 = fm[s].0;
@@ -195,6 +176,21 @@ impl Stage for GhostWalls {
                 rho.0 = ghost_density(fr[s].0, fx[s].0, pos, correction.map(|c| (c, body)));
             });
         Ok(())
+    }
+
+    /// Mirrors the fluid's positions, velocities, densities and masses across the
+    /// walls where the world has them: writes the ghost particles (with the wall each
+    /// was mirrored across) and the ghost settings.
+    fn access(&self) -> Access {
+        Access::new()
+            .reads::<Position>()
+            .reads::<Velocity>()
+            .reads::<Density>()
+            .reads::<Mass>()
+            .reads::<WallPose>()
+            .writes::<Ghost>()
+            .writes::<MirrorWall>()
+            .writes::<GhostSettings>()
     }
 }
 
@@ -211,7 +207,7 @@ impl GhostWalls {
         let support = sim.constants.support();
         let on_wall = ON_WALL * sim.constants.spacing;
         let lines = self.walls.lines();
-        let corners = &self.corners;
+        let corners = self.walls.corners();
         // A particle on the wall (closer than `on_wall`) is its own mirror image: a
         // ghost there would count its mass twice for its neighbours.
         let near = |w: &WallLine, x: DVec2| {
@@ -236,7 +232,8 @@ impl GhostWalls {
                             });
                         }
                     }
-                    for &(a, b) in corners {
+                    for c in corners {
+                        let (a, b) = (c.first, c.second);
                         if near(&lines[a], x.0) && near(&lines[b], x.0) {
                             out.push(Image {
                                 source,
@@ -256,30 +253,12 @@ impl GhostWalls {
 
 /// Velocity of the ghost of a particle at `x` moving at `v`, mirrored across wall `w`
 /// (`line` its geometry) relative to the wall's velocity at the particle's foot on it.
-fn mirror_velocity(line: &WallLine, w: &Wall, x: DVec2, v: DVec2, slip: Slip) -> DVec2 {
+fn mirror_velocity(line: &WallLine, w: &WallPose, x: DVec2, v: DVec2, slip: Slip) -> DVec2 {
     let n = line.normal;
     let vw = w.velocity_at(x - line.distance(x) * n);
     match slip {
         Slip::FreeSlip => v - 2.0 * (v - vw).dot(n) * n,
         Slip::NoSlip => 2.0 * vw - v,
-    }
-}
-
-/// Ghost density: the source's, or with the hydrostatic correction the density whose
-/// pressure is p_source + rho_0 (g - a_w) . (x_ghost - x_source), a_w the acceleration
-/// at the source of the body (tank or piston) whose wall it was mirrored across.
-fn ghost_density(
-    rho_source: f64,
-    source: DVec2,
-    ghost: DVec2,
-    correction: Option<((Tait, DVec2), Pose)>,
-) -> f64 {
-    match correction {
-        Some(((eos, g), pose)) => {
-            let g_eff = g - pose.acceleration_at(source);
-            eos.density(eos.pressure(rho_source) + eos.rho0 * g_eff.dot(ghost - source))
-        }
-        None => rho_source,
     }
 }
 
@@ -296,6 +275,7 @@ fn resize_pool(world: &mut hecs::World, needed: usize) {
                 Density(1.0),
                 Pressure(0.0),
                 Mass(0.0),
+                MirrorWall::default(),
             )
         }));
     } else if needed < have {
@@ -309,36 +289,4 @@ fn resize_pool(world: &mut hecs::World, needed: usize) {
             let _ = world.despawn(e);
         }
     }
-}
-
-/// Re-copies every ghost's density from its source (after a stage changed the fluid
-/// densities, e.g. re-initialisation), with the hydrostatic correction if enabled.
-pub fn refresh_ghost_density(sim: &Sim) -> Result<(), StepError> {
-    let (Some(fluid), Some(ghost)) = (
-        archetype::<Fluid>(&sim.world),
-        archetype::<Ghost>(&sim.world),
-    ) else {
-        return Ok(());
-    };
-    let settings = sim
-        .resources
-        .get::<GhostSettings>()
-        .filter(|s| s.hydrostatic);
-    let eos_g = (sim.constants.eos, sim.constants.gravity);
-    let (fx, fr) = (column::<Position>(fluid)?, column::<Density>(fluid)?);
-    let (gs, gx) = (column::<Ghost>(ghost)?, column::<Position>(ghost)?);
-    let mut gr = column_mut::<Density>(ghost)?;
-    let (fx, fr): (&[Position], &[Density]) = (&fx, &fr);
-    (&mut gr[..], &gs[..], &gx[..])
-        .into_par_iter()
-        .enumerate()
-        .for_each(|(k, (rho, g, x))| {
-            let s = g.source as usize;
-            let body = settings.and_then(|st| {
-                let wall = *st.wall_of_ghost.get(k)? as usize;
-                st.poses.get(wall).copied()
-            });
-            rho.0 = ghost_density(fr[s].0, fx[s].0, x.0, body.map(|b| (eos_g, b)));
-        });
-    Ok(())
 }

@@ -13,9 +13,10 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{get_column, put_column, Dec, Enc};
 use sph_core::components::{Acceleration, Density, DensityRate, Fluid, Position, Velocity};
-use sph_core::sim::Sim;
+use sph_core::contract::Access;
+use sph_core::sim::{Clock, Sim};
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::walls::WallSet;
+use sph_core::vocab::{BodyPose, HalfDensity, HalfVelocity, WallPose, Walls};
 use sph_core::world::{archetype, column_mut, ensure_component};
 use sph_core::StageRegistry;
 
@@ -99,7 +100,7 @@ pub fn register(registry: &mut StageRegistry) {
             Ok(Integrate {
                 params: p,
                 first_dt: None,
-                walls: WallSet::default(),
+                walls: Walls::default(),
                 zero_a: Vec::new(),
                 zero_r: Vec::new(),
             })
@@ -107,20 +108,12 @@ pub fn register(registry: &mut StageRegistry) {
     );
 }
 
-/// v at the last half step (leapfrog state).
-#[derive(Clone, Copy, Debug, Default)]
-pub struct HalfVelocity(pub DVec2);
-/// rho at the last half step (leapfrog state).
-#[derive(Clone, Copy, Debug, Default)]
-pub struct HalfDensity(pub f64);
-
-sph_core::checkpoint_newtype!(HalfVelocity(DVec2), HalfDensity(f64));
-
 pub struct Integrate {
     params: Params,
     first_dt: Option<f64>,
-    /// Walls where they are at the end of the step.
-    walls: WallSet,
+    /// The walls where the world has them at the end of the step (the clock's advance
+    /// moves them), re-read every step (a reused buffer).
+    walls: Walls,
     /// Zero rates for a pipeline without forces or continuity.
     zero_a: Vec<Acceleration>,
     zero_r: Vec<DensityRate>,
@@ -134,12 +127,11 @@ impl Stage for Integrate {
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         ensure_component::<Fluid, HalfVelocity>(sim);
         ensure_component::<Fluid, HalfDensity>(sim);
-        self.walls = WallSet::from_world(&sim.world);
         Ok(())
     }
 
     /// The first step (the collapse reference) and the half-step columns; the walls
-    /// follow from the time.
+    /// follow the clock.
     fn save_state(&mut self, sim: &Sim) -> Result<Vec<u8>, StepError> {
         let mut e = Enc::default();
         e.opt_f64(self.first_dt);
@@ -221,10 +213,10 @@ impl Stage for Integrate {
         } else {
             0.5 * (sim.clock.dt + dt)
         };
-        sim.clock.dt = dt;
-        sim.clock.time += dt;
-        sim.clock.step += 1;
-        self.walls.at(sim.clock.time);
+        // The clock advances, and the scene with it: the walls where they are at the
+        // end of the step, which is where the particles are checked against them.
+        sim.clock.advance(dt, &sim.world);
+        self.walls.read(&sim.world);
         let reflect = self.params.reflect_at_walls;
         let floor = if self.params.restore_density_on_reflection {
             c.eos.rho0
@@ -291,6 +283,26 @@ impl Stage for Integrate {
             None => Ok(()),
         }
     }
+
+    /// Advances the fluid state and the clock (and with it the scene: the walls' and
+    /// bodies' poses); integrates with zero rates when no stage writes them.
+    fn access(&self) -> Access {
+        Access::new()
+            .reads::<Position>()
+            .reads::<Velocity>()
+            .reads::<Density>()
+            .reads::<WallPose>()
+            .uses::<Acceleration>()
+            .uses::<DensityRate>()
+            .writes::<Clock>()
+            .writes::<WallPose>()
+            .writes::<BodyPose>()
+            .writes::<Position>()
+            .writes::<Velocity>()
+            .writes::<Density>()
+            .writes::<HalfVelocity>()
+            .writes::<HalfDensity>()
+    }
 }
 
 /// The step-size inputs, from one parallel pass; the rare diagnostics (which particle
@@ -339,7 +351,10 @@ impl Integrate {
         let what = if !p.is_finite() || !r.is_finite() {
             "non-finite position or density".to_string()
         } else if let Some(w) = self.walls.crossed(p, sim.constants.support()) {
-            format!("particle passed through {}", self.walls.describe(w))
+            format!(
+                "particle passed through {}",
+                self.walls.describe(&sim.world, w)
+            )
         } else if p.cmplt(lo).any() || p.cmpgt(hi).any() {
             "particle left the domain".to_string()
         } else {

@@ -26,21 +26,21 @@
 //! on the walls without needing a wall integration; at rest it is the moment of the
 //! liquid's weight.
 
-use crate::neighbour_grid::Neighbours;
 use glam::DVec2;
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::{
-    Acceleration, Density, Fluid, Mass, NeighbourCount, Position, Pressure, PressureSensor, Tank,
-    Velocity, Wall, WaveGauge,
+    Acceleration, Density, Fluid, Ghost, Mass, NeighbourCount, Position, Pressure, PressureSensor,
+    Tank, Velocity, Wall, WaveGauge,
 };
+use sph_core::contract::Access;
 use sph_core::kernel;
+use sph_core::kinematics;
 use sph_core::motion::Pose;
-use sph_core::piston::PISTON_WALL;
 use sph_core::series::SeriesWriter;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::walls::WallSet;
+use sph_core::vocab::{BodyPose, Neighbours, Piston, WallPose};
 use sph_core::world::{archetype, column, Particles};
 use sph_core::StageRegistry;
 
@@ -127,7 +127,8 @@ pub fn register(registry: &mut StageRegistry) {
                 params: p,
                 sensors: Vec::new(),
                 gauges: Vec::new(),
-                walls: WallSet::default(),
+                moving: false,
+                piston: None,
                 next: 0.0,
                 out: None,
             })
@@ -139,7 +140,10 @@ pub struct Probe {
     params: Params,
     sensors: Vec<PressureSensor>,
     gauges: Vec<WaveGauge>,
-    walls: WallSet,
+    /// Something in the scene moves (gauges then measure in the tank frame).
+    moving: bool,
+    /// The piston's wall entity (found by its `Piston` component).
+    piston: Option<hecs::Entity>,
     next: f64,
     out: Option<SeriesWriter>,
 }
@@ -153,7 +157,13 @@ impl Stage for Probe {
         let err = |m: String| SetupError::new("probe", m);
         self.sensors = sph_core::world::cloned::<PressureSensor>(&sim.world);
         self.gauges = sph_core::world::cloned::<WaveGauge>(&sim.world);
-        self.walls = WallSet::from_world(&sim.world);
+        self.moving = kinematics::moving(&sim.world);
+        self.piston = sim
+            .world
+            .query::<hecs::Entity>()
+            .with::<(&Piston, &Wall)>()
+            .iter()
+            .next();
         let needs_grid = !self.sensors.is_empty() && self.params.methods.contains(&Method::Shepard);
         if needs_grid && !sim.resources.contains::<Neighbours>() {
             return Err(err(
@@ -181,7 +191,7 @@ impl Stage for Probe {
                 ));
             }
         }
-        if self.params.piston && self.piston_wall().is_none() {
+        if self.params.piston && self.piston.is_none() {
             return Err(err("piston: true needs a `piston` in the scenario".into()));
         }
         if self.params.piston && !sim.resources.contains::<Neighbours>() {
@@ -221,7 +231,6 @@ impl Stage for Probe {
             return Ok(());
         }
         self.next = sim.clock.time + self.params.interval;
-        self.walls.at(sim.clock.time);
         let row = self.sample(sim)?;
         if let Some(out) = &mut self.out {
             out.push(sim.clock.time, row)?;
@@ -334,6 +343,29 @@ impl Stage for Probe {
         }
         Ok(())
     }
+
+    /// Samples the fluid and the walls where the world has them; the neighbour grid
+    /// for Method I (when there are sensors) and the piston force.
+    fn access(&self) -> Access {
+        let shepard = self.params.methods.contains(&Method::Shepard);
+        let access = Access::new()
+            .reads::<Position>()
+            .reads::<Velocity>()
+            .reads::<Density>()
+            .reads::<Pressure>()
+            .reads::<Mass>()
+            .reads::<WallPose>()
+            .reads::<BodyPose>()
+            .reads_if::<Neighbours>(self.params.piston)
+            .reads_if::<NeighbourCount>(self.params.neighbours)
+            .reads_if::<Acceleration>(self.params.roll_moment)
+            .uses::<Ghost>();
+        if shepard && !self.params.piston {
+            access.uses::<Neighbours>()
+        } else {
+            access
+        }
+    }
 }
 
 impl Probe {
@@ -379,10 +411,18 @@ impl Probe {
         let x = particles.fluid::<Position>()?;
         let p = particles.fluid::<Pressure>()?;
         let ds = sim.constants.spacing;
-        let pose = self.walls.pose();
+        // The scene as the world holds it now: the tank's pose (at rest at the origin
+        // without a tank), the sensors' walls.
+        let pose = kinematics::tank_pose(&sim.world).unwrap_or_default();
+        let wall_now = |e: hecs::Entity| {
+            sim.world
+                .get::<&WallPose>(e)
+                .map(|w| *w)
+                .map_err(|_| StepError::Internal("a probed wall is not in the world".into()))
+        };
         let mut row = Vec::new();
         for s in &self.sensors {
-            let wall = &self.walls.now()[s.wall];
+            let wall = &wall_now(s.wall)?;
             let at = wall.point(s.along);
             let carry = Carry {
                 rho0: sim.constants.eos.rho0,
@@ -397,7 +437,7 @@ impl Probe {
             }
         }
         for g in &self.gauges {
-            row.push(gauge(&x, g.x, ds, self.walls.moving().then_some(pose)));
+            row.push(gauge(&x, g.x, ds, self.moving.then_some(pose)));
         }
         if self.params.front {
             let front = x
@@ -449,10 +489,10 @@ impl Probe {
                 sim.constants.gravity,
             ));
         }
-        if self.params.piston {
-            let k = self.piston_wall().unwrap_or(0);
-            let (wall, rest) = (&self.walls.now()[k], &self.walls.rest()[k]);
-            row.push(wall.a.x - rest.a.x);
+        if let Some(piston) = self.piston.filter(|_| self.params.piston) {
+            let wall = &wall_now(piston)?;
+            let rest = sim.world.get::<&Wall>(piston).map_or(wall.a.x, |w| w.a.x);
+            row.push(wall.a.x - rest);
             // F = n_x * integral of p along the wetted paddle (midpoint rule, steps of
             // about ds); dry points interpolate to 0.
             let steps = (wall.length() / ds).ceil().max(1.0) as usize;
@@ -465,11 +505,6 @@ impl Probe {
             row.push(force * -wall.normal().x);
         }
         Ok(row)
-    }
-
-    /// Index of the piston's wall.
-    fn piston_wall(&self) -> Option<usize> {
-        self.walls.rest().iter().position(|w| w.name == PISTON_WALL)
     }
 
     /// Method I: Shepard interpolation of fluid and ghost pressures at `at`.
@@ -551,7 +586,7 @@ fn averaged(
     sim: &Sim,
     x: &[Position],
     p: &[Pressure],
-    wall: &Wall,
+    wall: &WallPose,
     s: &PressureSensor,
     carry: Carry,
 ) -> f64 {

@@ -2,34 +2,28 @@
 //! summed over every fluid particle's neighbours in one pass of the pair layer, and
 //! the results written into the particle columns.
 
-use crate::neighbour_grid::Neighbours;
 use crate::terms::{Fixed, RateTerms, TermBit};
 use rayon::prelude::*;
-use sph_core::components::{Acceleration, DensityRate};
-use sph_core::pair::{with_records, EquationsOfMotion, Pass, RateTerm};
+use sph_core::components::{
+    Acceleration, Density, DensityRate, Mass, Position, Pressure, Velocity,
+};
+use sph_core::contract::Access;
+use sph_core::pair::{with_records, EquationsOfMotion, Field, Fields, Pass, RateTerm};
 use sph_core::sim::Sim;
 use sph_core::stage::StepError;
+use sph_core::vocab::Neighbours;
 use sph_core::with_kernel;
 
-/// Marks that a stage writes the density rate, so that a second one refuses to.
-pub(crate) struct DensityRateWriter(pub &'static str);
-
-/// At setup: claims the density rate for `stage`, or refuses if another stage has.
-pub(crate) fn claim_density_rate(
-    sim: &mut Sim,
-    stage: &'static str,
-) -> Result<(), sph_core::stage::SetupError> {
-    if let Some(DensityRateWriter(other)) = sim.resources.get::<DensityRateWriter>() {
-        return Err(sph_core::stage::SetupError::new(
-            stage,
-            format!(
-                "`{other}` already writes the density rate (a Continuity() stage and a \
-                 Continuity() term of Forces); remove one of them"
-            ),
-        ));
-    }
-    sim.resources.insert(DensityRateWriter(stage));
-    Ok(())
+/// Declares in `access` the particle columns that records of `fields` are packed from.
+pub(crate) fn declare_reads(access: Access, fields: Fields) -> Access {
+    let has = |list: &[Field]| list.iter().any(|&f| fields.contains(f));
+    access
+        .reads::<Neighbours>()
+        .reads::<Position>()
+        .reads::<Mass>()
+        .reads_if::<Velocity>(has(&[Field::Vx, Field::Vy]))
+        .reads_if::<Density>(has(&[Field::Rho, Field::Sound, Field::PRho2]))
+        .reads_if::<Pressure>(has(&[Field::PRho2]))
 }
 
 /// Fluid particles per parallel chunk.

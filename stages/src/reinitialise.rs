@@ -5,17 +5,18 @@
 //! density field and so does not lift a free surface when run often.
 //! Run it every N steps with the stage's `every: N`; leave the stage out for "never".
 
-use crate::ghost_walls::refresh_ghost_density;
-use crate::integrate::HalfDensity;
-use crate::neighbour_grid::Neighbours;
 use crate::terms::{mls::Mls, shepard::Shepard};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use sph_core::components::Density;
+use sph_core::components::{Density, Ghost, Mass, Position};
+use sph_core::contract::Access;
 use sph_core::kernel::Kernel;
 use sph_core::pair::{with_records, PairTerm, Pass};
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
+use sph_core::vocab::{
+    refresh_ghost_density, require_neighbours, GhostSettings, HalfDensity, Neighbours,
+};
 use sph_core::{with_kernel, StageRegistry};
 
 /// The density filter.
@@ -54,13 +55,7 @@ impl Stage for Reinitialise {
     }
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
-        if sim.resources.contains::<Neighbours>() {
-            return Ok(());
-        }
-        Err(SetupError::new(
-            "reinitialise",
-            "needs neighbour lists: put NeighbourGrid() before it in the pipeline",
-        ))
+        require_neighbours(sim, "reinitialise")
     }
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
@@ -106,6 +101,17 @@ impl Stage for Reinitialise {
             return Ok(());
         }
         refresh_ghost_density(sim)
+    }
+
+    fn access(&self) -> Access {
+        Access::new()
+            .reads::<Neighbours>()
+            .reads::<Position>()
+            .reads::<Mass>()
+            .updates::<Density>()
+            .uses::<HalfDensity>()
+            .uses::<Ghost>()
+            .uses::<GhostSettings>()
     }
 }
 

@@ -9,9 +9,9 @@
 //! test is the same arithmetic in both (dx*dx + dy*dy < r_s^2, no fused multiply-add),
 //! so a run's numbers do not depend on which one the machine uses.
 
-use crate::neighbour_grid::{resize_by_eighths, CellGrid, NeighbourBlock};
 use glam::DVec2;
 use sph_core::components::Position;
+use sph_core::vocab::{resize_by_eighths, CellGrid, NeighbourBlock};
 use std::ops::Range;
 
 /// The candidate scan this machine runs, chosen once per step.

@@ -5,10 +5,11 @@ use glam::DVec2;
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::{Position, Pressure};
+use sph_core::contract::Access;
 use sph_core::output::png::{pressure_colour_range, write_snapshot, Snapshot};
 use sph_core::sim::Sim;
 use sph_core::stage::{Stage, StepError};
-use sph_core::walls::WallSet;
+use sph_core::vocab::{WallPose, Walls};
 use sph_core::world::Particles;
 use sph_core::StageRegistry;
 
@@ -127,10 +128,12 @@ impl Stage for Snapshots {
             .map(|(q, p)| (q.0, p.0))
             .filter(|(q, _)| inside(q))
             .unzip();
-        // Walls where they are now (a rolling tank's walls move).
-        let mut set = WallSet::from_world(&sim.world);
-        let walls: Vec<(DVec2, DVec2)> =
-            set.at(sim.clock.time).iter().map(|w| (w.a, w.b)).collect();
+        // Walls where the world has them now (a rolling tank's walls move).
+        let walls: Vec<(DVec2, DVec2)> = Walls::of(&sim.world)
+            .now()
+            .iter()
+            .map(|w| (w.a, w.b))
+            .collect();
         // The requested region, or everything: walls and particles.
         let (lo, hi) = match self.params.region {
             Some(((x0, y0), (x1, y1))) => (DVec2::new(x0, y0), DVec2::new(x1, y1)),
@@ -161,5 +164,13 @@ impl Stage for Snapshots {
             width_px: self.params.width,
         };
         write_snapshot(&path, &snapshot).map_err(|e| StepError::output(&path, e))
+    }
+
+    /// Draws the fluid's pressures and the walls where the world has them.
+    fn access(&self) -> Access {
+        Access::new()
+            .reads::<Position>()
+            .reads::<Pressure>()
+            .reads::<WallPose>()
     }
 }

@@ -14,10 +14,10 @@
 //! inserted some other way) is left unsorted, and the `cell_sort_skipped` diagnostic
 //! says so, rather than scrambling that column.
 
-use crate::neighbour_grid::resize_by_eighths;
 use rayon::prelude::*;
 use sph_core::components::{Fluid, Ghost, Position};
 use sph_core::stage::StepError;
+use sph_core::vocab::resize_by_eighths;
 use sph_core::world::{archetype, column, column_mut, ColumnKinds};
 
 /// The sort's working buffers. `NeighbourGrid` lends it the grid's own (cell per

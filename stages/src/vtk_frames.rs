@@ -5,12 +5,14 @@
 
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
+use sph_core::components::{Density, NeighbourCount, Position, Pressure, Velocity};
+use sph_core::contract::Access;
 use sph_core::frame::write_fluid_frame;
 use sph_core::output::vtk::{write_segments_vtp, PvdIndex};
 use sph_core::series::check_samples;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::walls::WallSet;
+use sph_core::vocab::{WallPose, Walls};
 use sph_core::StageRegistry;
 
 /// The most frames a run may write.
@@ -57,8 +59,8 @@ pub struct VtkFrames {
     next: f64,
     written: usize,
     index: Option<PvdIndex>,
-    /// A moving tank's walls and their index.
-    walls: Option<(WallSet, PvdIndex)>,
+    /// The walls' index, when the scene moves (the walls are read from the world).
+    walls: Option<PvdIndex>,
 }
 
 impl Stage for VtkFrames {
@@ -82,9 +84,8 @@ impl Stage for VtkFrames {
         )
         .map_err(|m| SetupError::new("vtk_frames", m))?;
         self.index = Some(PvdIndex::new(sim.out_dir.join("frames.pvd")));
-        let walls = WallSet::from_world(&sim.world);
-        if walls.moving() {
-            self.walls = Some((walls, PvdIndex::new(sim.out_dir.join("walls.pvd"))));
+        if sph_core::kinematics::moving(&sim.world) {
+            self.walls = Some(PvdIndex::new(sim.out_dir.join("walls.pvd")));
         }
         Ok(())
     }
@@ -94,7 +95,7 @@ impl Stage for VtkFrames {
         let mut e = Enc::default();
         e.f64(self.next);
         e.u64(self.written as u64);
-        let indexes = self.index.iter().chain(self.walls.iter().map(|(_, i)| i));
+        let indexes = self.index.iter().chain(self.walls.iter());
         for index in indexes {
             e.u64(index.entries().len() as u64);
             for (t, name) in index.entries() {
@@ -109,10 +110,7 @@ impl Stage for VtkFrames {
         let mut d = Dec::new(state);
         self.next = d.f64()?;
         self.written = d.u64()? as usize;
-        let indexes = self
-            .index
-            .iter_mut()
-            .chain(self.walls.iter_mut().map(|(_, i)| i));
+        let indexes = self.index.iter_mut().chain(self.walls.iter_mut());
         for index in indexes {
             let n = d.len(16)?;
             let entries = (0..n)
@@ -145,11 +143,12 @@ impl Stage for VtkFrames {
                 .push(sim.clock.time, &name)
                 .map_err(|e| StepError::output(&sim.out_dir.join("frames.pvd"), e))?;
         }
-        if let Some((walls, index)) = &mut self.walls {
+        if let Some(index) = &mut self.walls {
             let name = format!("frames/walls_{:05}.vtp", self.written);
             let path = sim.out_dir.join(&name);
-            let segments: Vec<_> = walls
-                .at(sim.clock.time)
+            // Where the world has the walls now.
+            let segments: Vec<_> = Walls::of(&sim.world)
+                .now()
                 .iter()
                 .map(|w| (w.a, w.b))
                 .collect();
@@ -160,5 +159,16 @@ impl Stage for VtkFrames {
         }
         self.written += 1;
         Ok(())
+    }
+
+    /// Writes the fluid state and the walls where the world has them.
+    fn access(&self) -> Access {
+        Access::new()
+            .reads::<Position>()
+            .reads::<Velocity>()
+            .reads::<Density>()
+            .reads::<Pressure>()
+            .reads::<WallPose>()
+            .uses::<NeighbourCount>()
     }
 }

@@ -6,7 +6,7 @@
 use crate::support::{load, nan_max, read_csv, temp_out};
 use sph_core::components::{Density, Position, Velocity};
 use sph_core::runner::{run_keeping_state, RunOptions};
-use sph_core::walls::WallSet;
+use sph_core::walls::Walls;
 use sph_core::world::Particles;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::{Path, PathBuf};
@@ -130,8 +130,8 @@ fn final_state(sim: &sph_core::Sim) -> (usize, usize) {
         particles.fluid::<Velocity>().expect("velocities"),
         particles.fluid::<Density>().expect("densities"),
     );
-    let mut walls = WallSet::from_world(&sim.world);
-    walls.at(sim.clock.time);
+    // The walls where the world has them at the final time.
+    let walls = Walls::of(&sim.world);
     let (lo, hi) = sim.constants.domain;
     let reach = sim.constants.support();
     let outside = x

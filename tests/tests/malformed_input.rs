@@ -471,6 +471,60 @@ fn cases() -> Vec<Case> {
             &["Integrate runs every step"],
         ),
         case(
+            "two writers of the density rate",
+            dam("        Forces(", "        Continuity(),\n        Forces("),
+            LineOf("Forces(alpha"),
+            Is("pipeline"),
+            &[
+                "Forces writes `DensityRate`",
+                "which Continuity (line",
+                "one writer: remove one of them",
+            ],
+        ),
+        case(
+            "two writers of the density rate, the other order",
+            dam("        Probe(", "        Continuity(),\n        Probe("),
+            LineOf("Continuity(),"),
+            Is("pipeline"),
+            &[
+                "Continuity writes `DensityRate`",
+                "which Forces (line",
+                "remove one of them",
+            ],
+        ),
+        case(
+            "reader before its writer",
+            dam("        NeighbourGrid(),\n", "").replacen(
+                "        Probe(",
+                "        NeighbourGrid(),\n        Probe(",
+                1,
+            ),
+            LineOf("Reinitialise("),
+            Is("pipeline"),
+            &[
+                "Reinitialise reads `Neighbours`, which no stage before it writes",
+                "NeighbourGrid (line",
+                "put NeighbourGrid before Reinitialise",
+            ],
+        ),
+        case(
+            "reader without a writer",
+            dam("        NeighbourGrid(),\n", ""),
+            LineOf("Reinitialise("),
+            Is("pipeline"),
+            &[
+                "Reinitialise reads `Neighbours`",
+                "no stage of the pipeline writes it",
+            ],
+        ),
+        case(
+            "nothing advances the clock",
+            dam("        Integrate(courant: 0.25),\n", ""),
+            LineOf("pipeline:"),
+            Is("pipeline"),
+            &["no stage advances the clock", "add Integrate()"],
+        ),
+        case(
             "tilt out of range",
             dam_value("tank", "(width: 3.22, height: 1.8, motion: (tilt: 95.0))"),
             LineOf("tank:"),

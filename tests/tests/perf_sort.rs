@@ -152,20 +152,22 @@ fn continuity_in_the_forces_loop_is_bit_identical_to_the_separate_stage() {
 }
 
 #[test]
-fn continuity_written_twice_is_refused_at_setup() {
+fn continuity_written_twice_is_refused_at_load_in_either_order() {
+    // A Continuity() stage beside Forces(with_continuity: true): two writers of the
+    // density rate, refused by the declared contracts before anything runs, whether
+    // Continuity comes before Forces or after it.
     let forces = SCENE.find("        Forces(").expect("a Forces stage");
-    let both = format!(
-        "{}        Continuity(),\n{}",
-        &SCENE[..forces],
-        &SCENE[forces..]
-    );
-    let scenario = load(&both, "both.ron", &["end_time=0.001"]);
-    let opts = sph_core::runner::RunOptions {
-        out_dir: sph_tests::support::temp_out("both"),
-        threads: Some(1),
-        ..Default::default()
-    };
-    let err = sph_core::runner::run(scenario, &opts).expect_err("both write the density rate");
-    assert!(err.to_string().contains("remove one of them"), "{err}");
-    let _ = std::fs::remove_dir_all(&opts.out_dir);
+    let probe = SCENE.find("        Probe(").expect("a Probe stage");
+    for (at, second) in [(forces, "Forces"), (probe, "Continuity")] {
+        let both = format!("{}        Continuity(),\n{}", &SCENE[..at], &SCENE[at..]);
+        let registry = sph_stages::standard_registry();
+        let err = sph_core::Scenario::from_str(&both, "both.ron", &[], &registry)
+            .expect_err("both write the density rate");
+        let shown = err.to_string();
+        assert!(shown.contains("remove one of them"), "{shown}");
+        assert!(
+            shown.contains(&format!("{second} writes `DensityRate`")),
+            "{shown}"
+        );
+    }
 }

@@ -90,3 +90,42 @@ fn standard_registry_refuses_the_plugin_stage() {
         + 1;
     assert_eq!(err.line, line, "{shown}");
 }
+
+/// A stage that changes the clock without declaring it (a second integrator written
+/// before contracts, say) stops the run at its first call, naming it.
+#[test]
+fn a_stage_changing_the_clock_without_declaring_it_is_stopped() {
+    use sph_core::sim::Sim;
+    use sph_core::stage::{Stage, StepError};
+    struct Skip;
+    impl Stage for Skip {
+        fn name(&self) -> &'static str {
+            "skip"
+        }
+        fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
+            sim.clock.time += 1e-4;
+            Ok(())
+        }
+    }
+    #[derive(serde::Deserialize, serde::Serialize)]
+    struct NoParams {}
+    let mut registry = sph_stages::standard_registry();
+    max_speed::register(&mut registry);
+    registry.register("skip", "test: moves the clock", |_: NoParams| Ok(Skip));
+    let text = std::fs::read_to_string(FILE).expect("plugin.ron");
+    let text = text.replacen(
+        "        Integrate(",
+        "        Skip(),\n        Integrate(",
+        1,
+    );
+    let scenario =
+        Scenario::from_str(&text, FILE, &[], &registry).unwrap_or_else(|e| panic!("{e}"));
+    let out = sph_tests::support::temp_out("skip");
+    let err = run(scenario, &RunOptions::quiet(&out, 1)).expect_err("the clock is Integrate's");
+    let shown = err.to_string();
+    assert!(
+        shown.contains("stage `skip`") && shown.contains("changed the clock without declaring it"),
+        "{shown}"
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}

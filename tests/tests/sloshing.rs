@@ -2,9 +2,10 @@
 //! sensors riding with the tank, and the roll response against linear theory.
 
 use glam::DVec2;
+use sph_core::components::WallPose;
 use sph_core::components::{Mass, PressureSensor};
+use sph_core::kinematics;
 use sph_core::linear_sloshing::{tilted_tank_moment, RectangularTank};
-use sph_core::walls::WallSet;
 use sph_core::world::Particles;
 use sph_tests::stability::{run_hard_case, Bounds, Outcome};
 use sph_tests::support::{load, run_completed, series};
@@ -60,12 +61,11 @@ fn tilted_tank_at_rest_has_a_level_surface_hydrostatic_sensors_and_the_static_mo
     // centre line at height h (area conservation). 3 % of the local pressure: the
     // hydrostatic test holds 2 % of rho g H with the same kernel; the remaining
     // sloshing adds ~1 % (its amplitude after the smooth ramp is ~3 % of the tilt).
-    let mut walls = WallSet::from_world(&sim.world);
-    walls.at(sim.clock.time);
-    let pose = walls.pose();
+    // The tank and the sensors' walls where the world has them at the final time.
+    let pose = kinematics::tank_pose(&sim.world).expect("a tank");
     let level = pose.to_world(DVec2::new(l / 2.0, h)).y;
     for s in sim.world.query::<&PressureSensor>().iter() {
-        let at = walls.now()[s.wall].point(s.along);
+        let at = sim.world.get::<&WallPose>(s.wall).unwrap().point(s.along);
         let exact = rho0 * g * (level - at.y);
         for method in ["shepard", "nearest", "averaged"] {
             let p = avg(&format!("{}.{method}", s.name));
@@ -104,7 +104,6 @@ fn sensors_ride_with_the_tank() {
         &["tank.motion=(roll: (amplitude: 10.0, period: 1.0), sway: (amplitude: 0.05, period: 2.0), heave: (amplitude: 0.02, period: 0.5), ramp: 0.0)"],
     );
     let sim = scenario.build_sim(std::env::temp_dir());
-    let mut walls = WallSet::from_world(&sim.world);
     let rest: Vec<(String, DVec2)> = scenario
         .spec
         .pressure_sensors
@@ -112,7 +111,7 @@ fn sensors_ride_with_the_tank() {
         .map(|s| (s.name.clone(), DVec2::from(s.at)))
         .collect();
     for t in [0.0, 0.13, 0.37, 0.8] {
-        walls.at(t);
+        kinematics::place(&sim.world, t);
         let (angle, sway, heave) = (
             10f64.to_radians() * (2.0 * std::f64::consts::PI * t).sin(),
             0.05 * (std::f64::consts::PI * t).sin(),
@@ -123,7 +122,7 @@ fn sensors_ride_with_the_tank() {
             let q = rest.iter().find(|r| r.0 == s.name).unwrap().1;
             let expected =
                 pivot + DVec2::new(sway, heave) + DVec2::from_angle(angle).rotate(q - pivot);
-            let got = walls.now()[s.wall].point(s.along);
+            let got = sim.world.get::<&WallPose>(s.wall).unwrap().point(s.along);
             assert!(
                 (got - expected).length() < 1e-12,
                 "{} at t = {t}: {got} vs {expected}",

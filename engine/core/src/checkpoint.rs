@@ -12,11 +12,12 @@
 //! The payload is written by the runner: clock, diagnostics, the fluid and ghost
 //! particle columns of the core components, then every stage's private state
 //! ([`crate::Stage::save_state`]), encoded with [`Enc`] (little-endian, no padding).
-//! Wall and piston positions are functions of time and are not stored.
+//! Wall and piston positions are functions of time and are not stored: the runner puts
+//! the scene back where it was at the checkpoint's time ([`crate::kinematics`]).
 
 use crate::components::{
-    Acceleration, Density, DensityRate, Fluid, Ghost, Mass, NeighbourCount, ParticleId, Position,
-    Pressure, Velocity,
+    Acceleration, Density, DensityRate, Fluid, Ghost, Mass, MirrorWall, NeighbourCount, ParticleId,
+    Position, Pressure, Velocity,
 };
 use crate::world::archetype;
 use glam::DVec2;
@@ -26,7 +27,8 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 const MAGIC: &[u8; 8] = b"SPHCKPT\0";
-const VERSION: u32 = 1;
+/// 2: the ghosts' `MirrorWall` column joined the ghost columns.
+const VERSION: u32 = 2;
 /// The newest checkpoint's file name.
 pub const LATEST: &str = "checkpoint.bin";
 /// The previous checkpoint's file name (the fallback).
@@ -472,6 +474,19 @@ impl Field for Ghost {
     }
 }
 
+impl Field for MirrorWall {
+    const BYTES: usize = 8;
+    fn put(&self, e: &mut Enc) {
+        e.u64(self.0.to_bits().get());
+    }
+    fn get(d: &mut Dec) -> Result<Self, StateError> {
+        let bits = d.u64()?;
+        hecs::Entity::from_bits(bits)
+            .map(MirrorWall)
+            .ok_or_else(|| StateError::Mismatch(format!("{bits} is not a wall entity")))
+    }
+}
+
 /// Writes column `T` of `arch` (a presence flag, the length, the values).
 pub fn put_column<T: Component + Field>(e: &mut Enc, arch: Option<&Archetype>) {
     match arch.and_then(|a| a.get::<&T>()) {
@@ -552,6 +567,7 @@ pub fn put_particles(e: &mut Enc, world: &World) {
     put_column::<Density>(e, ghost);
     put_column::<Pressure>(e, ghost);
     put_column::<Mass>(e, ghost);
+    put_column::<MirrorWall>(e, ghost);
 }
 
 /// Restores what [`put_particles`] wrote into a world built from the same scenario
@@ -586,6 +602,8 @@ pub fn get_particles(d: &mut Dec, world: &mut World) -> Result<(), StateError> {
     column("Pressure", p.as_ref().map(Vec::len))?;
     let m = read_values::<Mass>(d)?;
     column("Mass", m.as_ref().map(Vec::len))?;
+    let wall = read_values::<MirrorWall>(d)?;
+    column("MirrorWall", wall.as_ref().map(Vec::len))?;
     let old: Vec<hecs::Entity> = world
         .query::<hecs::Entity>()
         .with::<&Ghost>()
@@ -595,14 +613,15 @@ pub fn get_particles(d: &mut Dec, world: &mut World) -> Result<(), StateError> {
         let _ = world.despawn(e);
     }
     if n > 0 {
-        let (x, v, rho, p, m) = (
+        let (x, v, rho, p, m, wall) = (
             x.unwrap_or_default(),
             v.unwrap_or_default(),
             rho.unwrap_or_default(),
             p.unwrap_or_default(),
             m.unwrap_or_default(),
+            wall.unwrap_or_default(),
         );
-        world.spawn_batch((0..n).map(|i| (source[i], x[i], v[i], rho[i], p[i], m[i])));
+        world.spawn_batch((0..n).map(|i| (source[i], x[i], v[i], rho[i], p[i], m[i], wall[i])));
     }
     Ok(())
 }

@@ -62,6 +62,18 @@ component!(
     ParticleId(u32)
 );
 
+/// The wall entity a ghost particle was (first) mirrored across: a component of every
+/// ghost, written with it by the ghost-wall stage (its body's acceleration enters the
+/// ghost's hydrostatic density).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MirrorWall(pub hecs::Entity);
+
+impl Default for MirrorWall {
+    fn default() -> Self {
+        Self(hecs::Entity::DANGLING)
+    }
+}
+
 /// Marker of fluid particles: the integrated particles.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Fluid;
@@ -76,8 +88,9 @@ pub struct Ghost {
 
 /// A straight wall segment from `a` to `b`; the fluid lies on its left
 /// (the inward normal is the direction a->b turned 90 degrees counter-clockwise).
-/// As a component it holds the tank-frame geometry; [`crate::walls::WallSet`] gives
-/// the walls at an instant in the world frame, with `body` the tank's pose then.
+/// As a component it holds the wall at rest, in the frame of the body it rides on (the
+/// tank frame, or a piston's rest place), as the scenario wrote it; where the wall is
+/// now is its [`WallPose`], which the kinematics ([`crate::kinematics`]) writes.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Wall {
     pub name: String,
@@ -89,6 +102,52 @@ pub struct Wall {
 }
 
 impl Wall {
+    /// The wall where it rests (its own geometry as a [`WallPose`]).
+    pub fn at_rest(&self) -> WallPose {
+        WallPose {
+            a: self.a,
+            b: self.b,
+            body: self.body,
+        }
+    }
+    /// The wall carried to the world by `pose`, the pose of the body it rides on.
+    pub fn placed(&self, pose: Pose) -> WallPose {
+        WallPose {
+            a: pose.to_world(self.a),
+            b: pose.to_world(self.b),
+            body: pose,
+        }
+    }
+    /// Unit normal pointing into the fluid.
+    pub fn normal(&self) -> DVec2 {
+        self.at_rest().normal()
+    }
+    /// Signed distance of `x` from the wall's line, positive on the fluid side.
+    pub fn distance(&self, x: DVec2) -> f64 {
+        self.at_rest().distance(x)
+    }
+    /// Abscissa of the projection of `x` along the wall, 0 at `a`, |b-a| at `b`.
+    pub fn abscissa(&self, x: DVec2) -> f64 {
+        self.at_rest().abscissa(x)
+    }
+    pub fn length(&self) -> f64 {
+        self.at_rest().length()
+    }
+}
+
+/// Where a wall is now (at the clock's time), in the world frame, with the pose of the
+/// body it rides on (the tank's, or a piston's own). A component of every wall entity,
+/// written by the kinematics ([`crate::kinematics`]) whenever the clock advances;
+/// stages read wall poses from here.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct WallPose {
+    pub a: DVec2,
+    pub b: DVec2,
+    /// Pose of the body the wall rides on, for its velocity and acceleration.
+    pub body: Pose,
+}
+
+impl WallPose {
     /// Unit normal pointing into the fluid.
     pub fn normal(&self) -> DVec2 {
         (self.b - self.a).perp().normalize_or_zero()
@@ -122,6 +181,12 @@ impl Wall {
     }
 }
 
+/// The pose now (at the clock's time) of a body with a prescribed motion: the tank
+/// (at rest for a fixed tank) and each piston. Written by the kinematics
+/// ([`crate::kinematics`]) from the body's [`crate::motion::Motion`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BodyPose(pub Pose);
+
 /// The tank: an axis-aligned box in its own frame with the bottom-left inner corner at
 /// the origin, and the pivot it rolls about. A moving tank also has a
 /// [`crate::motion::Motion`] component.
@@ -133,12 +198,13 @@ pub struct Tank {
     pub pivot: DVec2,
 }
 
-/// Where a wall sensor's pressure is read: abscissa `along` on wall `wall` (so it rides
-/// with the wall), over a width `width` along the wall (Method III's pseudo-sensor).
+/// Where a wall sensor's pressure is read: abscissa `along` on the wall entity `wall`
+/// (so it rides with the wall), over a width `width` along the wall (Method III's
+/// pseudo-sensor).
 #[derive(Clone, Debug, PartialEq)]
 pub struct PressureSensor {
     pub name: String,
-    pub wall: usize,
+    pub wall: hecs::Entity,
     pub along: f64,
     pub width: f64,
 }

@@ -4,8 +4,10 @@
 
 pub mod checkpoint;
 pub mod components;
+pub mod contract;
 pub mod frame;
 pub mod kernel;
+pub mod kinematics;
 pub mod linear_sloshing;
 pub mod motion;
 pub mod output;
@@ -22,6 +24,7 @@ pub mod sim;
 pub mod stage;
 pub mod study;
 pub mod sweep;
+pub mod vocab;
 pub mod walls;
 pub mod waves;
 pub mod world;

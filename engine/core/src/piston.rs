@@ -1,8 +1,9 @@
 //! A piston wave maker: a vertical paddle wall that moves horizontally with its own
 //! prescribed motion, a sinusoidal stroke brought in by a ramp or a measured
 //! displacement series. It is a [`Wall`](crate::components::Wall) entity that carries
-//! its own [`Motion`] (a sway without roll), so [`crate::walls::WallSet`] moves it
-//! independently of the tank and ghost walls mirror across it with its velocity.
+//! its own [`Motion`] (a sway without roll) and the [`Piston`] marker, so the
+//! kinematics ([`crate::kinematics`]) moves it independently of the tank, ghost walls
+//! mirror across it with its velocity, and a probe finds it by its component.
 
 use crate::motion::{HarmonicSpec, Motion, MotionSeries, MotionSpec};
 use crate::scenario::Positive;
@@ -92,7 +93,7 @@ impl PistonSpec {
     }
 }
 
-/// The piston wall's name (sensors can sit on it: `wall: "piston"`).
+/// The piston wall's name in the scenario (sensors can sit on it: `wall: "piston"`).
 pub const PISTON_WALL: &str = "piston";
 
 /// Marks the wall entity that is the piston (its [`Motion`] is on the same entity).

@@ -313,10 +313,22 @@ fn run_in_pool(
             if !step.is_multiple_of(entry.every as u64) {
                 continue;
             }
+            let clock = clock_bits(&sim);
             let result = {
                 let _span = tracing::info_span!("stage", name = label.as_str()).entered();
                 entry.stage.run(&mut sim)
             };
+            // Only the stage that declares the clock among its writes may change it.
+            let result = result.and_then(|()| {
+                if clock_bits(&sim) == clock || entry.access().writes_clock() {
+                    Ok(())
+                } else {
+                    Err(StepError::Internal(format!(
+                        "stage `{}` changed the clock without declaring it (Stage::access); only the stage that advances the clock may",
+                        entry.name
+                    )))
+                }
+            });
             if let Err(error) = result {
                 failure = Some((entry.name.clone(), step, error));
                 break 'steps;
@@ -465,6 +477,12 @@ fn stage_times(
     (stages, step.map_or(0, |s| s.calls))
 }
 
+/// The clock's time, step and dt, exactly (the end time is the run's, not the clock's).
+fn clock_bits(sim: &Sim) -> (u64, u64, u64) {
+    let c = &sim.clock;
+    (c.time.to_bits(), c.step, c.dt.to_bits())
+}
+
 /// Refuses checkpoint options that make no sense, before anything is written.
 fn check_options(opts: &RunOptions) -> Result<(), RunError> {
     let bad = |name: &str, v: f64| {
@@ -560,6 +578,8 @@ fn restore(
     sim.clock.time = d.f64()?;
     sim.clock.dt = d.f64()?;
     sim.clock.step = d.u64()?;
+    // The scene follows the clock: walls and pistons where they were at that time.
+    crate::kinematics::place(&sim.world, sim.clock.time);
     *ghost_sum = d.f64()?;
     let n = d.len(16)?;
     sim.diagnostics.clear();

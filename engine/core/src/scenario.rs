@@ -6,8 +6,9 @@
 //! RON, unknown stage or field, wrong type, out-of-range value — carries
 //! `file:line:column`, the field and what would be accepted.
 
-use crate::components::{Density, Position, Pressure, Velocity, Wall};
+use crate::components::{BodyPose, Density, Position, Pressure, Velocity, Wall};
 use crate::components::{Fluid, Mass, ParticleId, PressureSensor, Tank, WaveGauge};
+use crate::contract::{Access, Breach};
 use crate::kernel::KernelKind;
 use crate::motion::{Motion, MotionSeries, MotionSpec, Pose};
 use crate::overrides::{apply_overrides, Override};
@@ -251,22 +252,15 @@ pub struct PipelineEntry {
     /// parameters; default 1).
     pub every: u32,
     pub stage: Box<dyn Stage>,
+    /// What the stage declared it reads and writes ([`Stage::access`], asked once).
+    access: Access,
     resolved: String,
 }
 
 impl PipelineEntry {
-    /// A numeric parameter of the stage as resolved (defaults filled in), e.g.
-    /// `forces`' `alpha`.
-    pub fn number(&self, key: &str) -> Option<f64> {
-        let value: ron::Value = ron::from_str(&self.resolved).ok()?;
-        let ron::Value::Map(map) = value else {
-            return None;
-        };
-        let found = map.iter().find_map(|(k, v)| match (k, v) {
-            (ron::Value::String(k), ron::Value::Number(n)) if k == key => Some(n.into_f64()),
-            _ => None,
-        });
-        found
+    /// The stage's declared contract.
+    pub fn access(&self) -> &Access {
+        &self.access
     }
 }
 
@@ -377,6 +371,7 @@ impl<'de> Visitor<'de> for ParamsVisitor<'_> {
         Ok(PipelineEntry {
             name: self.name,
             every,
+            access: built.stage.access(),
             stage: built.stage,
             resolved: built.resolved_params,
         })
@@ -573,6 +568,16 @@ impl Scenario {
         }
     }
 
+    /// The value of type `T` a stage of the pipeline exposes ([`Access::exposes`]), e.g.
+    /// the artificial viscosity ([`crate::vocab::ArtificialViscosity`]): the first stage
+    /// in the list that exposes one.
+    pub fn exposed<T: std::any::Any>(&self) -> Option<&T> {
+        self.spec
+            .pipeline
+            .iter()
+            .find_map(|p| p.access.exposed::<T>())
+    }
+
     /// Walls of the scenario: the tank's, the extra ones, then the piston.
     pub fn walls(&self) -> Vec<Wall> {
         let mut walls = Vec::new();
@@ -729,19 +734,40 @@ impl Scenario {
                 height: t.height.0,
                 pivot: t.pivot(),
             };
+            let pose = BodyPose(Pose::at_rest(tank.pivot));
             match &self.motion {
-                Some(m) => world.spawn((tank, m.clone())),
-                None => world.spawn((tank,)),
+                Some(m) => world.spawn((tank, pose, m.clone())),
+                None => world.spawn((tank, pose)),
             };
         }
-        let walls = self.walls();
+        // Walls in list order (tank walls, extra walls, the piston), each with its pose
+        // now; the piston also carries its own motion and the `Piston` marker.
+        let mut wall_entities = Vec::new();
+        for w in self.walls() {
+            let name = w.name.clone();
+            let now = w.at_rest();
+            let entity = match (&self.piston, w.name == PISTON_WALL) {
+                (Some(m), true) => {
+                    let body = BodyPose(w.body);
+                    world.spawn((w, now, Piston, body, m.clone()))
+                }
+                _ => world.spawn((w, now)),
+            };
+            wall_entities.push((name, entity));
+        }
         for s in &self.spec.pressure_sensors {
-            let wall = walls.iter().position(|w| w.name == s.wall).unwrap_or(0);
+            // Validated: the sensor's wall exists.
+            let Some(&(_, wall)) = wall_entities.iter().find(|(name, _)| *name == s.wall) else {
+                continue;
+            };
+            let along = world
+                .get::<&Wall>(wall)
+                .map_or(0.0, |w| w.abscissa(s.at.into()));
             let width = s.width.map_or(2.0 * self.h, |w| w.0);
             world.spawn((PressureSensor {
                 name: s.name.clone(),
                 wall,
-                along: walls[wall].abscissa(s.at.into()),
+                along,
                 width,
             },));
         }
@@ -751,12 +777,8 @@ impl Scenario {
                 x: g.x,
             },));
         }
-        for w in walls {
-            match (&self.piston, w.name == PISTON_WALL) {
-                (Some(m), true) => world.spawn((w, Piston, m.clone())),
-                _ => world.spawn((w,)),
-            };
-        }
+        // Everything where its motion has it at t = 0.
+        crate::kinematics::place(&world, 0.0);
         Sim {
             world,
             clock: Clock {
@@ -970,33 +992,91 @@ fn validate(spec: ScenarioSpec, at: &Locator, source: PathBuf) -> Result<Scenari
             ));
         }
     }
-    if let Some((k, e)) = scenario
-        .spec
-        .pipeline
-        .iter()
-        .enumerate()
-        .find(|(_, e)| e.name == "integrate" && e.every != 1)
-    {
-        let place = at
-            .doc
-            .element(&["pipeline"], k, "every")
-            .or_else(|| at.doc.key(&["pipeline"]));
-        return Err(at.error(
-            "every",
-            place,
-            format!(
-                "Integrate(every: {}) would leave the clock standing on the other steps; accepted: Integrate runs every step (every: 1)",
-                e.every
-            ),
-        ));
-    }
     if scenario.spec.pipeline.is_empty() {
         return Err(at.field(
             "pipeline",
             "the pipeline is empty; list the stages to run".into(),
         ));
     }
+    check_contracts(&scenario.spec.pipeline, at)?;
     Ok(scenario)
+}
+
+/// The declared contracts over the whole pipeline ([`crate::contract::check`]), as an
+/// error placed at the offending stage's entry.
+fn check_contracts(pipeline: &[PipelineEntry], at: &Locator) -> Result<(), LoadError> {
+    let stages = pipeline.iter().map(|e| (&e.access, e.every));
+    let Err(breach) = crate::contract::check(stages) else {
+        return Ok(());
+    };
+    let entry = |k: usize| at.doc.element(&["pipeline"], k, "");
+    let name = |k: usize| camel_case(&pipeline[k].name);
+    let line = |k: usize| entry(k).map_or(0, |t| at.doc.line_col(t).0);
+    let (k, field, message) = match breach {
+        Breach::TwoWriters {
+            quantity,
+            first,
+            second,
+        } => (
+            Some(second),
+            "pipeline",
+            format!(
+                "{} writes `{}`, which {} (line {}) writes too; a quantity has one writer: remove one of them",
+                name(second),
+                quantity.name(),
+                name(first),
+                line(first)
+            ),
+        ),
+        Breach::Unwritten {
+            quantity,
+            reader,
+            update,
+            later,
+        } => {
+            let how = if update { "updates" } else { "reads" };
+            let fix = match later {
+                Some(w) => format!(
+                    "{} (line {}) writes it later in the step: put {} before {}",
+                    name(w),
+                    line(w),
+                    name(w),
+                    name(reader)
+                ),
+                None => format!(
+                    "no stage of the pipeline writes it: add the stage that does before {}",
+                    name(reader)
+                ),
+            };
+            (
+                Some(reader),
+                "pipeline",
+                format!(
+                    "{} {how} `{}`, which no stage before it writes; {fix}",
+                    name(reader),
+                    quantity.name()
+                ),
+            )
+        }
+        Breach::ClockNotEveryStep { stage, every } => {
+            let place = at.doc.element(&["pipeline"], stage, "every");
+            return Err(at.error(
+                "every",
+                place.or_else(|| at.doc.key(&["pipeline"])),
+                format!(
+                    "{0}(every: {every}) would leave the clock standing on the other steps; accepted: {0} runs every step (every: 1), as the stage that advances the clock",
+                    name(stage)
+                ),
+            ));
+        }
+        Breach::NoClock => (
+            None,
+            "pipeline",
+            "no stage advances the clock (none declares it among its writes): add Integrate() to the pipeline".into(),
+        ),
+    };
+    let place = k.and_then(entry).or_else(|| at.doc.key(&["pipeline"]));
+    Err(at.error(field, place, message))
 }
 
 /// The piston's motion, checked against the tank.

@@ -20,6 +20,20 @@ pub struct Clock {
     pub end_time: f64,
 }
 
+impl Clock {
+    /// Takes a step of `dt`: the time advances by it, the step count by one, and the
+    /// scene (tank, walls, pistons) moves to the new time ([`crate::kinematics`]), so
+    /// the world's wall poses always belong to `time`. Only the stage that declares the
+    /// clock among its writes ([`crate::contract::Quantity::clock`]; `Integrate`) calls
+    /// this, once per step.
+    pub fn advance(&mut self, dt: f64, scene: &hecs::World) {
+        self.dt = dt;
+        self.time += dt;
+        self.step += 1;
+        crate::kinematics::place(scene, self.time);
+    }
+}
+
 /// The Tait equation of state p = B [(rho/rho_0)^gamma - 1], B = rho_0 c_0^2 / gamma
 /// (docs/physics.md, "Governing equations").
 #[derive(Clone, Copy, Debug)]

@@ -26,6 +26,15 @@ pub trait Stage: Send {
         Ok(())
     }
 
+    /// What the stage reads and writes ([`crate::contract`]): the scenario loader
+    /// refuses a pipeline with two writers of one quantity, or a reader with no writer
+    /// before it, and only a stage that declares the clock may change it. Called once,
+    /// when the scenario loads. The default declares nothing: the stage is trusted, as
+    /// before contracts, but may not change the clock.
+    fn access(&self) -> crate::contract::Access {
+        crate::contract::Access::default()
+    }
+
     /// The stage's private state for a checkpoint (counters, next sample time,
     /// per-particle columns it owns), encoded with [`crate::checkpoint::Enc`]. Stages
     /// that write files flush them here, so the files hold every row up to the

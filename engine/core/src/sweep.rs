@@ -25,6 +25,7 @@ use crate::linear_sloshing::RectangularTank;
 use crate::output::plot::{plot_series, Series, Style};
 use crate::overrides::Override;
 use crate::runner::{run, RunError, RunOptions, Summary};
+use crate::vocab::ArtificialViscosity;
 use crate::{Scenario, StageRegistry};
 use std::f64::consts::PI;
 use std::fmt::Write as _;
@@ -358,19 +359,16 @@ fn theory_curve(base: &Scenario, f: f64, lo: f64, hi: f64, cap: f64) -> Vec<(f64
 /// (whole rows of ds, see `Scenario::initial_particles`) at filling `f`.
 ///
 /// It is damped by the artificial viscosity's equivalent kinematic viscosity
-/// nu = alpha h c_0 / 8 (Monaghan 2005; docs/analytic.md section 4), alpha from the
-/// pipeline's Forces stage: the damping the SPH scheme itself applies, so that the
-/// transient left by the start decays in theory as it does in the run.
+/// nu = alpha h c_0 / 8 (Monaghan 2005; docs/analytic.md section 4), alpha as the pipeline's
+/// momentum stage exposes it ([`ArtificialViscosity`]): the damping the SPH scheme
+/// itself applies, so that the transient left by the start decays in theory as it does
+/// in the run.
 pub fn linear_tank(scenario: &Scenario, f: f64) -> RectangularTank {
     let width = scenario.spec.tank.as_ref().map_or(1.0, |t| t.width.0);
     let ds = scenario.spacing;
     let alpha = scenario
-        .spec
-        .pipeline
-        .iter()
-        .find(|p| p.name == "forces")
-        .and_then(|p| p.number("alpha"))
-        .unwrap_or(0.0);
+        .exposed::<ArtificialViscosity>()
+        .map_or(0.0, |v| v.alpha);
     RectangularTank {
         breadth: width,
         depth: (f * width / ds + 1e-9).floor() * ds,

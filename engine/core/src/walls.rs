@@ -1,28 +1,26 @@
-//! The walls at an instant: the tank-frame [`Wall`] components carried to the world by
-//! the tank's pose, each with the tank's velocity and acceleration; a wall entity with
-//! its own [`Motion`] (a piston) moves by that motion instead. Stages that touch walls
-//! keep a `WallSet` and call [`WallSet::at`] for the time they work at; when nothing
-//! moves it returns the stored walls unchanged.
+//! All the walls at once, as the world holds them now: [`Walls::read`] copies the wall
+//! entities' current poses ([`WallPose`], written by [`crate::kinematics`]) in spawn
+//! order, with their lines (unit normal and tangent worked out once) for the
+//! per-particle tests, and the pairs of walls that meet (corners). A read-only view:
+//! it works out no motion, and a stage that keeps one re-reads it from the world each
+//! time it uses it (reusing its buffers).
 
-use crate::components::{Tank, Wall};
-use crate::motion::{Motion, Pose};
+use crate::components::{Wall, WallPose};
 use glam::DVec2;
-use hecs::World;
+use hecs::{Entity, World};
 
+/// The walls now, in spawn order (see the module docs).
 #[derive(Clone, Debug, Default)]
-pub struct WallSet {
-    /// Tank-frame geometry, in the order walls were spawned (sensors index it).
-    rest: Vec<Wall>,
-    /// The tank's motion and pose.
-    motion: Option<Motion>,
-    pose: Pose,
-    /// Walls with a motion of their own (a piston): (index, motion).
-    own: Vec<(usize, Motion)>,
-    now: Vec<Wall>,
+pub struct Walls {
+    entities: Vec<Entity>,
+    /// The walls now (world frame).
+    now: Vec<WallPose>,
     /// `now` as lines with unit normal and tangent, for per-particle tests.
     lines: Vec<WallLine>,
-    /// Pairs of walls that meet (see [`WallSet::corners`]).
+    /// Pairs of walls that meet (see [`Walls::corners`]).
     corners: Vec<Corner>,
+    /// Scratch: (entity, rest geometry, pose now) while reading.
+    read: Vec<(Entity, WallPose, WallPose)>,
 }
 
 /// Two walls that meet: an end of one lies on the other (a tank corner, or a piston
@@ -41,7 +39,7 @@ pub struct Corner {
     at_a: bool,
 }
 
-/// Where a particle has crossed the walls (see [`WallSet::crossed`]).
+/// Where a particle has crossed the walls (see [`Walls::crossed`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Crossing {
     /// Behind wall `k` while alongside it.
@@ -65,7 +63,7 @@ pub struct WallLine {
 }
 
 impl WallLine {
-    pub fn of(w: &Wall) -> Self {
+    pub fn of(w: &WallPose) -> Self {
         Self {
             a: w.a,
             normal: w.normal(),
@@ -99,59 +97,50 @@ impl WallLine {
     }
 }
 
-impl WallSet {
-    /// The world's walls and, if the tank moves, its motion.
-    pub fn from_world(world: &World) -> Self {
-        let mut walls: Vec<(hecs::Entity, Wall, Option<Motion>)> = world
-            .query::<(hecs::Entity, &Wall, Option<&Motion>)>()
-            .iter()
-            .map(|(e, w, m)| (e, w.clone(), m.cloned()))
-            .collect();
-        walls.sort_by_key(|(e, _, _)| e.id());
-        let own = walls
-            .iter()
-            .enumerate()
-            .filter_map(|(i, (_, _, m))| m.clone().map(|m| (i, m)))
-            .collect();
-        let rest: Vec<Wall> = walls.into_iter().map(|(_, w, _)| w).collect();
-        let mut tank = world.query::<(&Tank, Option<&Motion>)>();
-        let (pivot, motion) = tank
-            .iter()
-            .next()
-            .map(|(t, m)| (t.pivot, m.cloned()))
-            .unwrap_or_default();
-        let mut set = Self {
-            corners: corners_of(&rest),
-            lines: rest.iter().map(WallLine::of).collect(),
-            now: rest.clone(),
-            rest,
-            motion,
-            pose: Pose::at_rest(pivot),
-            own,
-        };
-        set.at(0.0);
-        set
+impl Walls {
+    /// The world's walls now.
+    pub fn of(world: &World) -> Self {
+        let mut walls = Self::default();
+        walls.read(world);
+        walls
+    }
+
+    /// Re-reads the walls from `world` (no allocation once the buffers have their
+    /// size): the wall entities in spawn order, where they are now, and the corners
+    /// their rest geometry forms.
+    pub fn read(&mut self, world: &World) {
+        self.read.clear();
+        self.read.extend(
+            world
+                .query::<(Entity, &Wall, &WallPose)>()
+                .iter()
+                .map(|(e, rest, now)| (e, rest.at_rest(), *now)),
+        );
+        self.read.sort_by_key(|(e, _, _)| e.id());
+        self.entities.clear();
+        self.entities.extend(self.read.iter().map(|r| r.0));
+        self.now.clear();
+        self.now.extend(self.read.iter().map(|r| r.2));
+        self.lines.clear();
+        self.lines.extend(self.now.iter().map(WallLine::of));
+        corners_of(self.read.iter().map(|r| r.1), &mut self.corners);
     }
 
     pub fn is_empty(&self) -> bool {
-        self.rest.is_empty()
+        self.now.is_empty()
     }
     pub fn len(&self) -> usize {
-        self.rest.len()
+        self.now.len()
     }
-    /// Whether any wall moves.
-    pub fn moving(&self) -> bool {
-        self.motion.is_some() || !self.own.is_empty()
+    /// The wall entities, in the order of [`Walls::now`].
+    pub fn entities(&self) -> &[Entity] {
+        &self.entities
     }
-    /// Tank-frame geometry.
-    pub fn rest(&self) -> &[Wall] {
-        &self.rest
-    }
-    /// The walls as last computed by [`WallSet::at`].
-    pub fn now(&self) -> &[Wall] {
+    /// The walls now.
+    pub fn now(&self) -> &[WallPose] {
         &self.now
     }
-    /// [`WallSet::now`] as lines.
+    /// [`Walls::now`] as lines.
     pub fn lines(&self) -> &[WallLine] {
         &self.lines
     }
@@ -193,58 +182,36 @@ impl WallSet {
             && (x - self.corner_point(corner)).length_squared() < reach * reach
     }
 
-    /// What [`WallSet::crossed`] found, in words: ``wall `right` `` or ``the corner of
-    /// walls `left` and `bottom` ``.
-    pub fn describe(&self, crossing: Crossing) -> String {
+    /// What [`Walls::crossed`] found, in words: ``wall `right` `` or ``the corner of
+    /// walls `left` and `bottom` `` (the names are the world's `Wall` components).
+    pub fn describe(&self, world: &World, crossing: Crossing) -> String {
+        let name = |k: usize| {
+            world
+                .get::<&Wall>(self.entities[k])
+                .map_or_else(|_| format!("#{k}"), |w| w.name.clone())
+        };
         match crossing {
-            Crossing::Wall(k) => format!("wall `{}`", self.now[k].name),
+            Crossing::Wall(k) => format!("wall `{}`", name(k)),
             Crossing::Corner(c) => format!(
                 "the corner of walls `{}` and `{}`",
-                self.now[c.first].name, self.now[c.second].name
+                name(c.first),
+                name(c.second)
             ),
         }
     }
-
-    /// The tank's pose as last computed.
-    pub fn pose(&self) -> Pose {
-        self.pose
-    }
-
-    /// The walls in the world frame at time `t` (no allocation).
-    pub fn at(&mut self, t: f64) -> &[Wall] {
-        if let Some(m) = &self.motion {
-            self.pose = m.pose(t);
-            for k in 0..self.rest.len() {
-                self.place(k, self.pose);
-            }
-        }
-        for j in 0..self.own.len() {
-            let (k, pose) = (self.own[j].0, self.own[j].1.pose(t));
-            self.place(k, pose);
-        }
-        &self.now
-    }
-
-    /// Puts wall `k` where `pose` carries its rest geometry.
-    fn place(&mut self, k: usize, pose: Pose) {
-        let (now, rest) = (&mut self.now[k], &self.rest[k]);
-        now.a = pose.to_world(rest.a);
-        now.b = pose.to_world(rest.b);
-        now.body = pose;
-        self.lines[k] = WallLine::of(now);
-    }
 }
 
-/// The pairs of walls where an end of one lies on the other, from the rest geometry.
-fn corners_of(walls: &[Wall]) -> Vec<Corner> {
-    let on = |p: DVec2, w: &Wall| {
+/// The pairs of walls where an end of one lies on the other, from the rest geometry,
+/// into `out`.
+fn corners_of(walls: impl Iterator<Item = WallPose> + Clone, out: &mut Vec<Corner>) {
+    let on = |p: DVec2, w: &WallPose| {
         let s = w.abscissa(p);
         w.distance(p).abs() < 1e-9 && s > -1e-9 && s < w.length() + 1e-9
     };
-    let mut out = Vec::new();
-    for i in 0..walls.len() {
-        for j in i + 1..walls.len() {
-            let (u, v) = (&walls[i], &walls[j]);
+    out.clear();
+    for (i, u) in walls.clone().enumerate() {
+        for (j, v) in walls.clone().enumerate().skip(i + 1) {
+            let (u, v) = (&u, &v);
             // The meeting point: an end of one wall lying on the other.
             let ends = [
                 (i, true, u.a, v),
@@ -256,7 +223,7 @@ fn corners_of(walls: &[Wall]) -> Vec<Corner> {
                 continue;
             };
             // Convex when each wall's far end is on the other's fluid side.
-            let far = |w: &Wall| {
+            let far = |w: &WallPose| {
                 if (w.a - meet).length() > (w.b - meet).length() {
                     w.a
                 } else {
@@ -273,12 +240,12 @@ fn corners_of(walls: &[Wall]) -> Vec<Corner> {
             });
         }
     }
-    out
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::motion::Pose;
 
     fn wall(name: &str, a: (f64, f64), b: (f64, f64)) -> Wall {
         Wall {
@@ -289,22 +256,28 @@ mod tests {
         }
     }
 
-    /// An open tank 1 m wide (left, bottom, right as the scenario builds them).
-    fn tank() -> WallSet {
+    /// A world with these walls at rest, as the scenario spawns them.
+    fn world_of(walls: impl IntoIterator<Item = Wall>) -> World {
         let mut world = World::new();
-        for w in [
+        for w in walls {
+            let now = w.at_rest();
+            world.spawn((w, now));
+        }
+        world
+    }
+
+    /// An open tank 1 m wide (left, bottom, right as the scenario builds them).
+    fn tank() -> World {
+        world_of([
             wall("left", (0.0, 1.0), (0.0, 0.0)),
             wall("bottom", (0.0, 0.0), (1.0, 0.0)),
             wall("right", (1.0, 0.0), (1.0, 1.0)),
-        ] {
-            world.spawn((w,));
-        }
-        WallSet::from_world(&world)
+        ])
     }
 
     #[test]
     fn tank_corners_are_found_and_convex() {
-        let set = tank();
+        let set = Walls::of(&tank());
         let c = set.corners();
         assert_eq!(c.len(), 2, "{c:?}");
         assert!(c.iter().all(|c| c.convex));
@@ -314,7 +287,8 @@ mod tests {
 
     #[test]
     fn a_point_past_a_corner_or_on_a_wall_end_has_crossed() {
-        let set = tank();
+        let world = tank();
+        let set = Walls::of(&world);
         let reach = 0.1;
         // Inside, and exactly on the corner: not crossed.
         assert_eq!(set.crossed(DVec2::new(0.5, 0.5), reach), None);
@@ -328,7 +302,7 @@ mod tests {
         let out = set.crossed(DVec2::new(-1e-6, -1e-6), reach);
         assert!(matches!(out, Some(Crossing::Corner(c)) if (c.first, c.second) == (0, 1)));
         assert_eq!(
-            set.describe(out.unwrap()),
+            set.describe(&world, out.unwrap()),
             "the corner of walls `left` and `bottom`"
         );
         // Above an open tank's side wall (spilled over it): not a crossing.
@@ -341,13 +315,52 @@ mod tests {
     fn a_wall_standing_on_the_floor_makes_a_corner() {
         // A piston-like wall from (0.2, 1) down to the floor at (0.2, 0), fluid on
         // its right: convex with the bottom (fluid in x > 0.2, y > 0).
-        let mut world = World::new();
-        world.spawn((wall("bottom", (0.0, 0.0), (1.0, 0.0)),));
-        world.spawn((wall("piston", (0.2, 1.0), (0.2, 0.0)),));
-        let set = WallSet::from_world(&world);
+        let world = world_of([
+            wall("bottom", (0.0, 0.0), (1.0, 0.0)),
+            wall("piston", (0.2, 1.0), (0.2, 0.0)),
+        ]);
+        let set = Walls::of(&world);
         let c = set.corners();
         assert_eq!(c.len(), 1, "{c:?}");
         assert!(c[0].convex);
         assert_eq!(set.corner_point(&c[0]), DVec2::new(0.2, 0.0));
+    }
+
+    #[test]
+    fn walls_are_read_in_spawn_order_and_follow_the_kinematics() {
+        use crate::components::{BodyPose, Tank};
+        use crate::motion::{HarmonicSpec, Motion, MotionSpec};
+        use crate::scenario::Positive;
+        let mut world = tank();
+        let spec = MotionSpec {
+            sway: Some(HarmonicSpec {
+                amplitude: 0.1,
+                period: Positive(1.0),
+                phase: 0.0,
+            }),
+            ramp: Some(0.0),
+            ..MotionSpec::default()
+        };
+        let pivot = DVec2::new(0.5, 0.0);
+        world.spawn((
+            Tank {
+                width: 1.0,
+                height: 1.0,
+                pivot,
+            },
+            Motion::new(&spec, pivot, None),
+            BodyPose(Pose::at_rest(pivot)),
+        ));
+        crate::kinematics::place(&world, 0.25);
+        let set = Walls::of(&world);
+        let names: Vec<String> = set
+            .entities()
+            .iter()
+            .map(|&e| world.get::<&Wall>(e).unwrap().name.clone())
+            .collect();
+        assert_eq!(names, ["left", "bottom", "right"]);
+        // A quarter period: swayed by the full amplitude.
+        assert!((set.now()[0].a - DVec2::new(0.1, 1.0)).length() < 1e-12);
+        assert!((set.lines()[2].a - DVec2::new(1.1, 0.0)).length() < 1e-12);
     }
 }

@@ -6,8 +6,8 @@
 //! can be borrowed together as long as no column is borrowed mutably twice.
 
 use crate::components::{
-    Acceleration, Density, DensityRate, Fluid, Ghost, Mass, NeighbourCount, ParticleId, Position,
-    Pressure, Velocity,
+    Acceleration, Density, DensityRate, Fluid, Ghost, Mass, MirrorWall, NeighbourCount, ParticleId,
+    Position, Pressure, Velocity,
 };
 use crate::sim::{Resources, Sim};
 use crate::stage::StepError;
@@ -114,6 +114,7 @@ impl Default for ColumnKinds {
         let mut kinds = Self(Vec::new());
         kinds.register::<Fluid>();
         kinds.register::<Ghost>();
+        kinds.register::<MirrorWall>();
         kinds.register::<ParticleId>();
         kinds.register::<Position>();
         kinds.register::<Velocity>();

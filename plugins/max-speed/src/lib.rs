@@ -38,6 +38,13 @@
 //!      through [`Particles`], the clock, constants, resources and diagnostics;
 //!    - [`Stage::finish`] (after the last step, also after an unstable stop): flush
 //!      files, draw plots;
+//!    - [`Stage::access`]: what the stage reads and writes, as typed quantities
+//!      ([`sph_core::contract`]): particle components, the shared vocabulary
+//!      ([`sph_core::vocab`]: neighbour lists, half-step state, wall poses, ...) or
+//!      the clock. The loader refuses a scenario where two stages write one quantity,
+//!      or a stage reads one that no earlier stage writes (nor the initial state
+//!      holds), naming the stage's line. Only a stage that declares the clock may
+//!      change it. A stage that declares nothing is trusted, as before;
 //!    - [`Stage::save_state`] and [`Stage::load_state`] (checkpoints, `engine
 //!      resume`): a stage that keeps anything between steps (counters, the next
 //!      sample time, per-particle columns it owns) encodes it with
@@ -66,6 +73,7 @@
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::Velocity;
+use sph_core::contract::Access;
 use sph_core::series::SeriesWriter;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
@@ -132,9 +140,13 @@ pub fn max_fluid_speed(sim: &Sim) -> Result<f64, StepError> {
     // rayon's `par_iter` on the slice; `max` is order-independent so it stays exact.)
     // NaN-propagating (not f64::max, which drops a NaN): the caller's finiteness check
     // must see a NaN velocity.
-    Ok(v.iter()
-        .map(|v| v.0.length())
-        .fold(0.0, crate::support::nan_max))
+    Ok(v.iter().map(|v| v.0.length()).fold(0.0, |m: f64, s| {
+        if m.is_nan() || s.is_nan() {
+            f64::NAN
+        } else {
+            m.max(s)
+        }
+    }))
 }
 
 impl Stage for MaxSpeed {
@@ -200,5 +212,11 @@ impl Stage for MaxSpeed {
             Some(out) => out.flush(),
             None => Ok(()),
         }
+    }
+
+    /// Reads the fluid velocities (which the initial state holds and `Integrate`
+    /// writes); writes nothing another stage reads.
+    fn access(&self) -> Access {
+        Access::new().reads::<Velocity>()
     }
 }

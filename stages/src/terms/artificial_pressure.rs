@@ -40,6 +40,7 @@ pub struct ArtificialPressure {
 }
 
 impl Term for ArtificialPressure {
+    const READS: Fields = Fields::of(&[Field::PRho2]);
     type Params = Params;
     fn check(p: &Params) -> Result<(), String> {
         check_non_negative(&[
@@ -66,7 +67,7 @@ impl Term for ArtificialPressure {
 
 impl RateTerm for ArtificialPressure {
     fn reads(&self) -> Fields {
-        Fields::of(&[Field::PRho2])
+        <Self as Term>::READS
     }
     const USES_COEF: bool = true;
     #[inline(always)]

@@ -45,6 +45,7 @@ impl ArtificialViscosity {
 }
 
 impl Term for ArtificialViscosity {
+    const READS: Fields = Fields::of(&[Field::Vx, Field::Vy, Field::Rho, Field::Sound]);
     type Params = Params;
     fn check(p: &Params) -> Result<(), String> {
         check_non_negative(&[("alpha", p.alpha), ("beta", p.beta)])
@@ -61,7 +62,7 @@ impl Term for ArtificialViscosity {
 
 impl RateTerm for ArtificialViscosity {
     fn reads(&self) -> Fields {
-        Fields::of(&[Field::Vx, Field::Vy, Field::Rho, Field::Sound])
+        <Self as Term>::READS
     }
     const USES_COEF: bool = true;
     #[inline(always)]

@@ -14,6 +14,7 @@ pub struct Params {}
 pub struct Continuity;
 
 impl Term for Continuity {
+    const READS: Fields = Fields::of(&[Field::Vx, Field::Vy]);
     type Params = Params;
     fn build(_: &Params, _: &Constants) -> Self {
         Continuity
@@ -22,7 +23,7 @@ impl Term for Continuity {
 
 impl RateTerm for Continuity {
     fn reads(&self) -> Fields {
-        Fields::of(&[Field::Vx, Field::Vy])
+        <Self as Term>::READS
     }
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {

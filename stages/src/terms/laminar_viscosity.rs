@@ -33,6 +33,7 @@ pub struct LaminarViscosity {
 }
 
 impl Term for LaminarViscosity {
+    const READS: Fields = Fields::of(&[Field::Vx, Field::Vy, Field::Rho]);
     type Params = Params;
     fn check(p: &Params) -> Result<(), String> {
         super::check_non_negative(&[("nu", p.nu)])
@@ -47,7 +48,7 @@ impl Term for LaminarViscosity {
 
 impl RateTerm for LaminarViscosity {
     fn reads(&self) -> Fields {
-        Fields::of(&[Field::Vx, Field::Vy, Field::Rho])
+        <Self as Term>::READS
     }
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {

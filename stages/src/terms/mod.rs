@@ -23,6 +23,9 @@ use sph_core::sim::Constants;
 
 /// A rate term built from its scenario parameters.
 pub trait Term: RateTerm + Sized {
+    /// The fields of i and j the term reads (its `RateTerm::reads`), known before the
+    /// run's constants are, for the stage's declared contract.
+    const READS: Fields;
     /// The parameters a scenario gives it, with documented defaults.
     type Params: Clone + std::fmt::Debug + Default + Serialize + DeserializeOwned;
     /// Refuses out-of-range parameters with a message naming the field and what is
@@ -61,6 +64,13 @@ macro_rules! rate_terms {
             pub fn name(&self) -> &'static str {
                 match self {
                     $(TermSpec::$ty(_) => stringify!($ty),)*
+                }
+            }
+
+            /// The fields the term reads.
+            pub fn reads(&self) -> Fields {
+                match self {
+                    $(TermSpec::$ty(_) => <$module::$ty as Term>::READS,)*
                 }
             }
         }

@@ -15,6 +15,7 @@ pub struct Params {}
 pub struct PressureGradient;
 
 impl Term for PressureGradient {
+    const READS: Fields = Fields::of(&[Field::PRho2]);
     type Params = Params;
     fn build(_: &Params, _: &Constants) -> Self {
         PressureGradient
@@ -23,7 +24,7 @@ impl Term for PressureGradient {
 
 impl RateTerm for PressureGradient {
     fn reads(&self) -> Fields {
-        Fields::of(&[Field::PRho2])
+        <Self as Term>::READS
     }
     const USES_COEF: bool = true;
     #[inline(always)]

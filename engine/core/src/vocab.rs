@@ -1,0 +1,332 @@
+//! The shared vocabulary: the quantities that several stages use, so that no stage
+//! imports another stage's module. A stage (standard or plugin) that wants the
+//! neighbour lists, the leapfrog's half-step state or the dissipation rate imports
+//! them from here, whichever stage produces them.
+//!
+//! - [`Neighbours`]: the neighbour lists of one step and the cell grid they were built
+//!   on (for point queries: sensors, gauges). Produced by the `NeighbourGrid` stage.
+//! - [`HalfVelocity`], [`HalfDensity`]: the leapfrog's half-step state, per fluid
+//!   particle. Produced by `Integrate`; `Reinitialise` shifts the density, `DampingZone`
+//!   damps the velocity.
+//! - [`ViscousDissipation`]: the artificial viscosity's dissipation rate, asked for by
+//!   `Energy` and filled in by `Forces`.
+//! - [`ArtificialViscosity`]: the viscosity coefficients the momentum stage exposes
+//!   (for a sweep's linear-theory damping).
+//! - [`ContinuityInPipeline`]: marks that a continuity stage writes the density rate.
+//! - [`GhostSettings`], [`refresh_ghost_density`]: how ghost densities follow their
+//!   sources (for a stage that changes fluid densities after the ghosts were placed).
+//! - [`require_neighbours`]: the setup check of the stages that sum over neighbours.
+//!
+//! - The scene as the world holds it, re-exported here: [`WallPose`] (each wall now),
+//!   [`BodyPose`] (the tank's and each piston's pose now), both written by the
+//!   kinematics when the clock advances; [`Walls`] (all walls at once, with their
+//!   lines and corners); [`MirrorWall`] (the wall a ghost was mirrored across);
+//!   [`Piston`] (the marker a stage finds the piston by).
+//!
+//! The particle components (`Position`, `Density`, ...) are in [`crate::components`].
+
+pub use crate::components::{BodyPose, MirrorWall, WallPose};
+use crate::components::{Density, Fluid, Ghost, Position};
+use crate::motion::Pose;
+pub use crate::piston::Piston;
+use crate::sim::{Sim, Tait};
+use crate::stage::{SetupError, StepError};
+pub use crate::walls::Walls;
+use crate::world::{archetype, column, column_mut};
+use glam::DVec2;
+use rayon::prelude::*;
+
+/// Fluid particles per block of neighbour lists (a power of two, so [`Neighbours::of`]
+/// finds a particle's block with a shift).
+pub const BLOCK_BITS: usize = 10;
+/// `1 << BLOCK_BITS`.
+pub const BLOCK: usize = 1 << BLOCK_BITS;
+
+/// Cells per kernel support of the cell grid (see the `NeighbourGrid` stage for why 1).
+pub const REACH: usize = 1;
+
+/// Rows (and columns) of cells searched around a particle.
+pub const ROWS: usize = 2 * REACH + 1;
+
+/// Resizes `v` to `n` elements; when its capacity must grow, to `n` and an eighth more,
+/// not by doubling: buffers that keep their capacity from step to step would otherwise
+/// hold up to twice the memory needed.
+pub fn resize_by_eighths<T: Clone>(v: &mut Vec<T>, n: usize, value: T) {
+    if n > v.capacity() {
+        v.reserve_exact(n + n / 8 - v.len());
+    }
+    v.resize(n, value);
+}
+
+/// A uniform grid of cells over the domain, each listing the particles inside it
+/// (joint numbering). The `NeighbourGrid` stage shapes and fills it; other stages use
+/// it for point queries ([`CellGrid::for_each_near`]).
+#[derive(Default)]
+pub struct CellGrid {
+    pub origin: DVec2,
+    /// Cell size [m].
+    pub cell: f64,
+    pub nx: usize,
+    pub ny: usize,
+    /// `start[c]..start[c+1]` indexes `particles` (and `xs`) for cell c.
+    pub start: Vec<u32>,
+    /// Joint indices, cell by cell, ascending within a cell.
+    pub particles: Vec<u32>,
+    /// x and y of the positions in the order of `particles` (separate arrays), so a
+    /// candidate scan reads contiguous memory and its distance test vectorises.
+    pub xs: Vec<f64>,
+    pub ys: Vec<f64>,
+    /// Each particle's cell (scratch kept between steps).
+    pub cells: Vec<u32>,
+}
+
+impl CellGrid {
+    /// Sets the grid geometry: cells of size `cell` covering `domain`.
+    pub fn shape(&mut self, domain: (DVec2, DVec2), cell: f64) {
+        self.origin = domain.0;
+        self.cell = cell;
+        let extent = domain.1 - domain.0;
+        self.nx = ((extent.x / cell).ceil() as usize).max(1);
+        self.ny = ((extent.y / cell).ceil() as usize).max(1);
+    }
+
+    /// The cell (column, row) holding `x`, clamped to the grid.
+    #[inline(always)]
+    pub fn cell_of(&self, x: DVec2) -> (usize, usize) {
+        // floor by truncation (a positive number truncates to its floor; anything
+        // else, NaN included, goes to cell 0 as the clamp did): `f64::floor` is a
+        // library call on baseline x86-64.
+        let c = (x - self.origin) / self.cell;
+        let index = |c: f64, n: usize| if c > 0.0 { (c as usize).min(n - 1) } else { 0 };
+        (index(c.x, self.nx), index(c.y, self.ny))
+    }
+
+    /// The index of the cell holding `x`.
+    #[inline(always)]
+    pub fn index_of(&self, x: DVec2) -> usize {
+        let (cx, cy) = self.cell_of(x);
+        cy * self.nx + cx
+    }
+
+    /// The index ranges (into `particles` / `xs`) of the `ROWS` x `ROWS` cells around
+    /// `x`, one per row of cells, in the fixed order (rows bottom to top).
+    #[inline(always)]
+    pub fn ranges_near(&self, x: DVec2) -> [std::ops::Range<usize>; ROWS] {
+        let (cx, cy) = self.cell_of(x);
+        let (x0, x1) = (cx.saturating_sub(REACH), (cx + REACH).min(self.nx - 1));
+        std::array::from_fn(|k| {
+            let y = cy + k;
+            if y < REACH || y - REACH >= self.ny {
+                return 0..0;
+            }
+            let r = (y - REACH) * self.nx;
+            self.start[r + x0] as usize..self.start[r + x1 + 1] as usize
+        })
+    }
+
+    /// Calls `f(j)` for every particle within one support of `x` or a little farther
+    /// (the cells around it), in the fixed order.
+    #[inline]
+    pub fn for_each_near(&self, x: DVec2, mut f: impl FnMut(u32)) {
+        if self.start.is_empty() {
+            return;
+        }
+        for range in self.ranges_near(x) {
+            for &j in &self.particles[range] {
+                f(j);
+            }
+        }
+    }
+}
+
+/// Neighbour lists of [`BLOCK`] consecutive fluid particles.
+#[derive(Default)]
+pub struct NeighbourBlock {
+    /// `list[offsets[k]..offsets[k+1]]` are the neighbours of the block's k-th particle.
+    pub offsets: Vec<u32>,
+    pub list: Vec<u32>,
+}
+
+/// The neighbour lists of one step: for every fluid particle the particles within the
+/// kernel support (joint numbering: fluid `0..n_fluid`, then ghosts), in a fixed order,
+/// kept in blocks of [`BLOCK`] particles that are built in parallel and reused from
+/// step to step. A resource of the [`Sim`], produced by the `NeighbourGrid` stage.
+#[derive(Default)]
+pub struct Neighbours {
+    pub n_fluid: usize,
+    pub n_ghost: usize,
+    /// Kernel support radius the lists were built for [m].
+    pub support: f64,
+    /// The lists, block by block (filled by the grid stage; read them with
+    /// [`Neighbours::of`]).
+    pub blocks: Vec<NeighbourBlock>,
+    /// The cell grid, for point queries (sensors, gauges).
+    pub grid: CellGrid,
+}
+
+impl Neighbours {
+    /// Neighbours of fluid particle `i` (joint numbering, self excluded).
+    #[inline(always)]
+    pub fn of(&self, i: usize) -> &[u32] {
+        let b = &self.blocks[i >> BLOCK_BITS];
+        let k = i & (BLOCK - 1);
+        &b.list[b.offsets[k] as usize..b.offsets[k + 1] as usize]
+    }
+
+    /// Checks that a buffer of `len` particles (joint numbering) holds every index in
+    /// the lists, which are below `n_fluid + n_ghost`: the SIMD pair sums gather
+    /// without bounds checks.
+    pub fn check_covers(&self, len: usize) -> Result<(), StepError> {
+        if self.n_fluid + self.n_ghost <= len {
+            Ok(())
+        } else {
+            Err(StepError::Internal(format!(
+                "the neighbour lists index {} particles but the particle buffer holds {len}: \
+                 a stage between NeighbourGrid and the pair sums changed the particle count",
+                self.n_fluid + self.n_ghost
+            )))
+        }
+    }
+
+    /// Total number of neighbour pairs (i, j) in the lists: the interactions one
+    /// pass over all neighbours evaluates.
+    pub fn interactions(&self) -> usize {
+        self.blocks.iter().map(|b| b.list.len()).sum()
+    }
+
+    /// Bytes held by the lists and the grid (capacity), for memory accounting.
+    pub fn heap_bytes(&self) -> usize {
+        let blocks: usize = self
+            .blocks
+            .iter()
+            .map(|b| 4 * (b.offsets.capacity() + b.list.capacity()))
+            .sum();
+        let g = &self.grid;
+        blocks
+            + 4 * (g.start.capacity() + g.particles.capacity() + g.cells.capacity())
+            + 8 * (g.xs.capacity() + g.ys.capacity())
+    }
+}
+
+/// Setup check shared by the stages that sum over neighbours.
+pub fn require_neighbours(sim: &Sim, stage: &'static str) -> Result<(), SetupError> {
+    if sim.resources.contains::<Neighbours>() {
+        Ok(())
+    } else {
+        Err(SetupError::new(
+            stage,
+            "needs neighbour lists: put NeighbourGrid() before it in the pipeline",
+        ))
+    }
+}
+
+/// v at the last half step (leapfrog state), per fluid particle.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct HalfVelocity(pub DVec2);
+/// rho at the last half step (leapfrog state), per fluid particle.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct HalfDensity(pub f64);
+
+crate::checkpoint_newtype!(HalfVelocity(DVec2), HalfDensity(f64));
+
+/// Work dissipated by the artificial viscosity: the forces stage stores its rate here
+/// each step when a stage that reports energy has asked for it (by inserting it).
+#[derive(Debug, Default, Clone, Copy)]
+pub struct ViscousDissipation {
+    /// Rate of dissipation this step [W per metre of depth].
+    pub power: f64,
+}
+
+/// Monaghan's artificial viscosity coefficients a momentum stage runs with, exposed in
+/// its declared contract ([`crate::contract::Access::exposes`]): a sweep damps its
+/// linear-theory reference by the viscosity they imply
+/// ([`crate::Scenario::exposed`]).
+#[derive(Debug, Default, Clone, Copy, PartialEq)]
+pub struct ArtificialViscosity {
+    /// Linear coefficient alpha.
+    pub alpha: f64,
+    /// Quadratic coefficient beta.
+    pub beta: f64,
+}
+
+/// Marks that a `Continuity()` stage writes the density rate (so `Forces` refuses to
+/// write it too).
+pub struct ContinuityInPipeline;
+
+/// How the ghost-wall stage sets ghost densities, for a later stage that refreshes
+/// them ([`refresh_ghost_density`]). What each ghost needs is on the ghost: its source
+/// (`Ghost`) and the wall it was mirrored across ([`MirrorWall`]).
+#[derive(Clone, Debug, Default)]
+pub struct GhostSettings {
+    /// The hydrostatic correction is on.
+    pub hydrostatic: bool,
+}
+
+/// Ghost density: the source's, or with the hydrostatic correction the density whose
+/// pressure is p_source + rho_0 (g - a_w) . (x_ghost - x_source), a_w the acceleration
+/// at the source of the body (tank or piston) whose wall it was mirrored across.
+#[inline]
+pub fn ghost_density(
+    rho_source: f64,
+    source: DVec2,
+    ghost: DVec2,
+    correction: Option<((Tait, DVec2), Pose)>,
+) -> f64 {
+    match correction {
+        Some(((eos, g), pose)) => {
+            let g_eff = g - pose.acceleration_at(source);
+            eos.density(eos.pressure(rho_source) + eos.rho0 * g_eff.dot(ghost - source))
+        }
+        None => rho_source,
+    }
+}
+
+/// Re-copies every ghost's density from its source (after a stage changed the fluid
+/// densities, e.g. re-initialisation), with the hydrostatic correction if enabled: the
+/// acceleration is that of the body whose wall the ghost was mirrored across, as the
+/// world holds it now (the walls have not moved since the ghosts were placed this step).
+pub fn refresh_ghost_density(sim: &Sim) -> Result<(), StepError> {
+    let (Some(fluid), Some(ghost)) = (
+        archetype::<Fluid>(&sim.world),
+        archetype::<Ghost>(&sim.world),
+    ) else {
+        return Ok(());
+    };
+    let hydrostatic = sim
+        .resources
+        .get::<GhostSettings>()
+        .is_some_and(|s| s.hydrostatic);
+    // The few walls' body poses, looked up by entity for each ghost.
+    let poses: Vec<(hecs::Entity, Pose)> = if hydrostatic {
+        sim.world
+            .query::<(hecs::Entity, &WallPose)>()
+            .iter()
+            .map(|(e, w)| (e, w.body))
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let eos_g = (sim.constants.eos, sim.constants.gravity);
+    let (fx, fr) = (column::<Position>(fluid)?, column::<Density>(fluid)?);
+    let (gs, gx) = (column::<Ghost>(ghost)?, column::<Position>(ghost)?);
+    let walls = if hydrostatic {
+        Some(column::<MirrorWall>(ghost)?)
+    } else {
+        None
+    };
+    let mut gr = column_mut::<Density>(ghost)?;
+    let (fx, fr): (&[Position], &[Density]) = (&fx, &fr);
+    let walls: Option<&[MirrorWall]> = walls.as_deref();
+    (&mut gr[..], &gs[..], &gx[..])
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(k, (rho, g, x))| {
+            let s = g.source as usize;
+            let body = walls.and_then(|w| {
+                let wall = w[k].0;
+                poses.iter().find(|(e, _)| *e == wall).map(|p| p.1)
+            });
+            rho.0 = ghost_density(fr[s].0, fx[s].0, x.0, body.map(|b| (eos_g, b)));
+        });
+    Ok(())
+}
