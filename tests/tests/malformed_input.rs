@@ -473,7 +473,7 @@ fn cases() -> Vec<Case> {
         case(
             "two writers of the density rate",
             dam("        Forces(", "        Continuity(),\n        Forces("),
-            LineOf("Forces(alpha"),
+            LineOf("Forces(terms"),
             Is("pipeline"),
             &[
                 "Forces writes `DensityRate`",
@@ -483,8 +483,8 @@ fn cases() -> Vec<Case> {
         ),
         case(
             "two writers of the density rate, the other order",
-            dam("        Probe(", "        Continuity(),\n        Probe("),
-            LineOf("Continuity(),"),
+            dam("        Probe(", "        Continuity(), // a second writer\n        Probe("),
+            LineOf("Continuity(), // a second writer"),
             Is("pipeline"),
             &[
                 "Continuity writes `DensityRate`",

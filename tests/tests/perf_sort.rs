@@ -153,7 +153,7 @@ fn continuity_in_the_forces_loop_is_bit_identical_to_the_separate_stage() {
 
 #[test]
 fn continuity_written_twice_is_refused_at_load_in_either_order() {
-    // A Continuity() stage beside Forces(with_continuity: true): two writers of the
+    // A Continuity() stage beside the Continuity() term of Forces: two writers of the
     // density rate, refused by the declared contracts before anything runs, whether
     // Continuity comes before Forces or after it.
     let forces = SCENE.find("        Forces(").expect("a Forces stage");

@@ -4,6 +4,7 @@
 //! positions meaningful and preserves the names of enum-like pipeline entries such as
 //! `Density(every: 5)`, which a generic RON value tree would drop.
 
+use crate::registry::snake_case;
 use std::ops::Range;
 use std::str::FromStr;
 
@@ -425,23 +426,6 @@ impl<'a> Body<'a> {
             }
         }
     }
-}
-
-/// `NeighbourGrid` → `neighbour_grid`, `EOSForce` → `eos_force`.
-fn snake_case(name: &str) -> String {
-    let chars: Vec<char> = name.chars().collect();
-    let mut out = String::with_capacity(name.len() + 4);
-    for (i, &c) in chars.iter().enumerate() {
-        if c.is_uppercase() && i > 0 {
-            let prev = chars[i - 1];
-            let next_lower = chars.get(i + 1).is_some_and(|n| n.is_lowercase());
-            if prev.is_lowercase() || prev.is_ascii_digit() || (prev.is_uppercase() && next_lower) {
-                out.push('_');
-            }
-        }
-        out.extend(c.to_lowercase());
-    }
-    out
 }
 
 /// Recursive-descent parser over the tokens of one RON text.

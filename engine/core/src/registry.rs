@@ -167,18 +167,21 @@ impl StageRegistry {
     }
 }
 
-/// `NeighbourGrid` -> `neighbour_grid` (already snake_case names pass through).
+/// `NeighbourGrid` -> `neighbour_grid`, `EOSForce` -> `eos_force` (a run of capitals
+/// is one word); already snake_case names pass through. The one conversion the loader,
+/// the registry and `--set` paths share.
 pub fn snake_case(name: &str) -> String {
+    let chars: Vec<char> = name.chars().collect();
     let mut out = String::with_capacity(name.len() + 4);
-    for (i, c) in name.chars().enumerate() {
-        if c.is_ascii_uppercase() {
-            if i > 0 {
+    for (i, &c) in chars.iter().enumerate() {
+        if c.is_uppercase() && i > 0 {
+            let prev = chars[i - 1];
+            let next_lower = chars.get(i + 1).is_some_and(|n| n.is_lowercase());
+            if prev.is_lowercase() || prev.is_ascii_digit() || (prev.is_uppercase() && next_lower) {
                 out.push('_');
             }
-            out.push(c.to_ascii_lowercase());
-        } else {
-            out.push(c);
         }
+        out.extend(c.to_lowercase());
     }
     out
 }
@@ -193,4 +196,28 @@ pub fn camel_case(name: &str) -> String {
             })
         })
         .collect()
+}
+
+#[cfg(test)]
+mod case_tests {
+    use super::{camel_case, snake_case};
+
+    #[test]
+    fn one_snake_case_for_stage_names_and_paths() {
+        for (camel, snake) in [
+            ("NeighbourGrid", "neighbour_grid"),
+            ("EOSForce", "eos_force"),
+            ("Eos", "eos"),
+            ("VtkFrames", "vtk_frames"),
+            ("Probe2D", "probe2_d"),
+            ("neighbour_grid", "neighbour_grid"),
+        ] {
+            assert_eq!(snake_case(camel), snake, "{camel}");
+        }
+        assert_eq!(camel_case("neighbour_grid"), "NeighbourGrid");
+        assert_eq!(
+            snake_case(&camel_case("laminar_viscosity")),
+            "laminar_viscosity"
+        );
+    }
 }
