@@ -69,19 +69,23 @@ pub(crate) fn run(
     const WAVES: u8 = bits(&[PressureGradient, ArtificialViscosity, Continuity]);
     const PLAIN: u8 = bits(&[PressureGradient, ArtificialViscosity]);
     const DENSITY: u8 = bits(&[Continuity]);
-    match terms.set() {
-        SPLASH => run_set(sim, &Fixed::<SPLASH>(terms), out, chunk_power),
-        WAVES => run_set(sim, &Fixed::<WAVES>(terms), out, chunk_power),
-        PLAIN => run_set(sim, &Fixed::<PLAIN>(terms), out, chunk_power),
-        DENSITY => run_set(sim, &Fixed::<DENSITY>(terms), out, chunk_power),
-        _ => run_set(sim, terms, out, chunk_power),
+    if let Some(set) = Fixed::<SPLASH>::of(terms) {
+        run_set(sim, set, out, chunk_power)
+    } else if let Some(set) = Fixed::<WAVES>::of(terms) {
+        run_set(sim, set, out, chunk_power)
+    } else if let Some(set) = Fixed::<PLAIN>::of(terms) {
+        run_set(sim, set, out, chunk_power)
+    } else if let Some(set) = Fixed::<DENSITY>::of(terms) {
+        run_set(sim, set, out, chunk_power)
+    } else {
+        run_set(sim, *terms, out, chunk_power)
     }
 }
 
 /// [`run`] for a term set `terms`.
-fn run_set<R: RateTerm>(
+fn run_set<R: RateTerm + Copy>(
     sim: &mut Sim,
-    terms: &R,
+    terms: R,
     out: Outputs,
     chunk_power: &mut Vec<f64>,
 ) -> Result<f64, StepError> {

@@ -139,7 +139,7 @@ fn start_up(isa: Isa, report: &[f64]) -> Vec<Vec<f64>> {
             records
                 .pack(&particles, terms.reads(), &constants.eos)
                 .unwrap();
-            let eom = EquationsOfMotion(&terms);
+            let eom = EquationsOfMotion(terms);
             let pass = Pass::with_isa(&eom, kernel, &records, isa).unwrap();
             let acc: Vec<DVec2> = (0..fluid.len())
                 .map(|i| pass.sum(i, &lists[i]).acc)

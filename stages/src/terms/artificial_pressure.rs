@@ -31,6 +31,7 @@ impl Default for Params {
     }
 }
 
+#[derive(Clone, Copy, Debug, Default)]
 pub struct ArtificialPressure {
     epsilon: f64,
     epsilon_positive: f64,
@@ -74,7 +75,12 @@ impl RateTerm for ArtificialPressure {
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
         let (c, zero) = (L::splat, L::zero());
         let (pi, pj) = (me.lanes::<L>(Field::PRho2), p.j(Field::PRho2));
-        let fij = whole_pow(p.w * c(self.inv_w_ds), self.exponent);
+        let x = p.w * c(self.inv_w_ds);
+        // The default exponent on its own, so the loop does not branch through a table.
+        let fij = match self.exponent {
+            4 => (x * x) * (x * x),
+            n => whole_pow(x, n),
+        };
         let both_positive = L::and(zero.lt(pi), zero.lt(pj));
         let tension = c(self.epsilon) * ((zero - pi).max(zero) + (zero - pj).max(zero));
         let compression = c(self.epsilon_positive) * (pi + pj);

@@ -29,6 +29,7 @@ impl Default for Params {
     }
 }
 
+#[derive(Clone, Copy, Debug, Default)]
 pub struct ArtificialViscosity {
     alpha: f64,
     beta: f64,

@@ -11,6 +11,7 @@ use sph_core::sim::Constants;
 #[serde(deny_unknown_fields)]
 pub struct Params {}
 
+#[derive(Clone, Copy, Debug, Default)]
 pub struct Continuity;
 
 impl Term for Continuity {

@@ -25,6 +25,7 @@ impl Default for Params {
     }
 }
 
+#[derive(Clone, Copy, Debug, Default)]
 pub struct LaminarViscosity {
     /// mu_i + mu_j = 2 rho_0 nu [Pa s].
     mu_sum: f64,

@@ -68,6 +68,7 @@ impl MlsSums {
 }
 
 /// The MLS-filtered density as a pair term, with W(0) for i's own contribution.
+#[derive(Clone, Copy, Debug)]
 pub struct Mls {
     pub w0: f64,
 }

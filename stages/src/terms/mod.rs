@@ -76,7 +76,7 @@ macro_rules! rate_terms {
         }
 
         /// The terms of one pair stage, each at most once.
-        #[derive(Default)]
+        #[derive(Clone, Copy, Debug, Default)]
         pub struct RateTerms {
             $(pub $module: Option<$module::$ty>,)*
         }
@@ -90,21 +90,36 @@ macro_rules! rate_terms {
 
         /// A term set with the terms known at compile time: bit k of `SET` for the
         /// k-th term of the list. The loop of a set that a stage runs often is compiled
-        /// for it (no test per term and pair, no code for the absent terms).
-        pub struct Fixed<'a, const SET: u8>(pub &'a RateTerms);
+        /// for it: no test per term and pair, no code for the absent terms (whose
+        /// slots hold unused defaults).
+        #[derive(Clone, Copy, Default)]
+        pub struct Fixed<const SET: u8> {
+            $($module: $module::$ty,)*
+        }
 
-        impl<const SET: u8> RateTerm for Fixed<'_, SET> {
+        impl<const SET: u8> Fixed<SET> {
+            /// The terms of `terms`, whose set must be `SET` (else None).
+            pub fn of(terms: &RateTerms) -> Option<Self> {
+                (terms.set() == SET).then(|| Self {
+                    $($module: terms.$module.unwrap_or_default(),)*
+                })
+            }
+        }
+
+        impl<const SET: u8> RateTerm for Fixed<SET> {
             const USES_COEF: bool =
                 false $(|| (SET & (1 << TermBit::$ty as u8) != 0 && <$module::$ty as RateTerm>::USES_COEF))*;
             fn reads(&self) -> Fields {
-                self.0.reads()
+                let mut f = Fields::default();
+                $(if SET & (1 << TermBit::$ty as u8) != 0 {
+                    f = f.with(<$module::$ty as Term>::READS);
+                })*
+                f
             }
             #[inline(always)]
             fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
                 $(if SET & (1 << TermBit::$ty as u8) != 0 {
-                    if let Some(t) = &self.0.$module {
-                        t.pair(me, p, r);
-                    }
+                    self.$module.pair(me, p, r);
                 })*
             }
         }

@@ -12,6 +12,7 @@ use sph_core::sim::Constants;
 #[serde(deny_unknown_fields)]
 pub struct Params {}
 
+#[derive(Clone, Copy, Debug, Default)]
 pub struct PressureGradient;
 
 impl Term for PressureGradient {

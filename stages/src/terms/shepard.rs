@@ -4,6 +4,7 @@
 use sph_core::pair::{Field, Fields, Lane, Me, Pair, PairTerm};
 
 /// The Shepard-filtered density, with W(0) for i's own contribution.
+#[derive(Clone, Copy, Debug)]
 pub struct Shepard {
     pub w0: f64,
 }

@@ -162,7 +162,7 @@ impl<L: Lane> Pair<L> {
 /// of the list in the SIMD path), `finish` once with the lanes of the accumulator.
 /// Implementations are monomorphised per lane type and kernel: no dynamic dispatch
 /// per pair.
-pub trait PairTerm: Sync {
+pub trait PairTerm: Sync + Clone {
     /// The per-particle accumulator in lanes.
     type Acc<L: Lane>: Copy;
     /// The per-particle result.
@@ -189,6 +189,10 @@ pub struct Pass<'a, T: PairTerm, K: Kernel> {
     isa: Isa,
     /// How far beyond i the padding particle sits: four supports.
     pad_shift: f64,
+    /// The fields gathered for each group (x, y, m and those the term reads) and
+    /// their offsets in a record, worked out once per pass.
+    wanted: [bool; Field::COUNT],
+    offsets: [usize; Field::COUNT],
 }
 
 /// The records do not hold a field that a term reads.
@@ -221,6 +225,8 @@ impl<'a, T: PairTerm, K: Kernel> Pass<'a, T, K> {
             records,
             isa,
             pad_shift: 4.0 * kernel.support(),
+            wanted: Field::ALL.map(|f| term.reads().with(Fields::GEOMETRY).contains(f)),
+            offsets: Field::ALL.map(|f| records.offset(f)),
         })
     }
 
@@ -279,27 +285,31 @@ impl<'a, T: PairTerm, K: Kernel> Pass<'a, T, K> {
     #[inline(always)]
     unsafe fn drive<L: Lane, const FIELDS: u16>(&self, i: usize, neighbours: &[u32]) -> T::Out {
         let (rec, k) = (self.records, &self.kernel);
-        let me = rec.particle(i);
+        // The fields gathered for every group: x, y and m (the geometry), and those
+        // the term reads (checked to be in the records by `Pass::new`); constants
+        // when the records' field set is.
+        // (Loops, not `array::map`, which is not inlined, so that the constants fold.)
+        let (mut wanted, mut offsets) = (self.wanted, self.offsets);
+        if FIELDS != 0 {
+            for k in 0..Field::COUNT {
+                wanted[k] = FIELDS & (1 << k) != 0;
+                offsets[k] = (FIELDS & ((1 << k) - 1)).count_ones() as usize;
+            }
+        }
+        let me = rec.particle(i, &wanted, &offsets);
         let mut pad = me.values;
         pad[Field::X as usize] += self.pad_shift;
         for f in [Field::Mass, Field::PRho2, Field::Sound] {
             pad[f as usize] = 0.0;
         }
         let (base, stride, len) = (rec.base(), rec.stride(), rec.len());
-        // The fields gathered for every group: x, y and m (the geometry), and those
-        // the term reads (checked to be in the records by `Pass::new`).
-        let reads = self.term.reads().with(Fields::GEOMETRY);
-        let wanted = Field::ALL.map(|f| match FIELDS {
-            0 => reads.contains(f),
-            known => Fields(known).contains(f),
-        });
-        let offsets = Field::ALL.map(|f| match FIELDS {
-            0 => rec.offset(f),
-            known => Fields(known).offset(f),
-        });
         let (xi, yi) = (L::splat(me.get(Field::X)), L::splat(me.get(Field::Y)));
         let inv_h = L::splat(k.inv_h());
-        let mut acc = self.term.zero::<L>();
+        // A copy of the term in the loop's own frame, so that its parameters (and the
+        // composite's choice of terms) are plain values there, not loads through
+        // references in every group.
+        let term = self.term.clone();
+        let mut acc = term.zero::<L>();
         for js in neighbours.chunks(L::WIDTH) {
             let mut fields = [L::zero(); Field::COUNT];
             // SAFETY: L's instructions exist (caller); `index` checks every index
@@ -331,9 +341,9 @@ impl<'a, T: PairTerm, K: Kernel> Pass<'a, T, K> {
                 gy: dy * f,
                 fields,
             };
-            self.term.pair(&me, &p, &mut acc);
+            term.pair(&me, &p, &mut acc);
         }
-        self.term.finish(&me, acc)
+        term.finish(&me, acc)
     }
 }
 

@@ -47,9 +47,10 @@ pub struct RateSums {
 }
 
 /// The pair term that sums a set of rate terms in one neighbour loop.
-pub struct EquationsOfMotion<'a, R: RateTerm>(pub &'a R);
+#[derive(Clone, Copy)]
+pub struct EquationsOfMotion<R: RateTerm>(pub R);
 
-impl<R: RateTerm> PairTerm for EquationsOfMotion<'_, R> {
+impl<R: RateTerm + Clone> PairTerm for EquationsOfMotion<R> {
     type Acc<L: Lane> = Rates<L>;
     type Out = RateSums;
 

@@ -170,14 +170,22 @@ impl Records {
     ///
     /// # Panics
     /// If `i` is beyond the records.
+    /// The `wanted` fields (held, at `offsets`) of particle `i`; 0 for the others.
     #[inline(always)]
-    pub(crate) fn particle(&self, i: usize) -> super::Me {
+    pub(crate) fn particle(
+        &self,
+        i: usize,
+        wanted: &[bool; Field::COUNT],
+        offsets: &[usize; Field::COUNT],
+    ) -> super::Me {
         assert!(i < self.len, "particle {i} of {} records", self.len);
         let record = &bytemuck_lines_ref(&self.lines)[i * self.stride..][..self.stride];
-        let values = Field::ALL.map(|f| match self.fields.contains(f) {
-            true => record[self.offsets[f as usize]],
-            false => 0.0,
-        });
+        let mut values = [0.0; Field::COUNT];
+        for k in 0..Field::COUNT {
+            if wanted[k] {
+                values[k] = record[offsets[k]];
+            }
+        }
         super::Me { values, index: i }
     }
 

@@ -7,6 +7,7 @@ use crate::sim::Tait;
 use crate::world::Particles;
 use glam::DVec2;
 
+#[derive(Clone)]
 /// A test term: sum_j m_j W_ij, sum_j m_j v_ij . grad_i W_ij and sum_j m_j p_j/rho_j^2 |grad W|.
 struct Probe;
 
@@ -144,6 +145,7 @@ fn every_instruction_set_sums_the_same_terms() {
 /// Every kernel's lane definition gives its scalar values on every instruction set.
 #[test]
 fn kernels_in_lanes_match_the_scalar_kernels() {
+    #[derive(Clone)]
     struct Shape;
     impl PairTerm for Shape {
         type Acc<L: Lane> = [L; 3];
