@@ -5,7 +5,7 @@
 
 use crate::support::{load, nan_max, read_csv, temp_out};
 use sph_core::components::{Density, Position, Velocity};
-use sph_core::runner::{run_keeping_state, RunOptions};
+use sph_run::runner::{run_keeping_state, RunOptions};
 use sph_core::walls::Walls;
 use sph_core::world::Particles;
 use std::panic::{catch_unwind, AssertUnwindSafe};
