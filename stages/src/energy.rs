@@ -11,12 +11,12 @@ use sph_core::checkpoint::{Dec, Enc, Resuming};
 use sph_core::components::{Density, Mass, Position, Velocity};
 use sph_core::contract::Access;
 use sph_core::series::SeriesWriter;
-use sph_output::SeriesPlot;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::ViscousDissipation;
 use sph_core::world::{sum_fixed, Particles};
 use sph_core::StageRegistry;
+use sph_output::SeriesPlot;
 
 const COLUMNS: [&str; 5] = ["kinetic", "potential", "internal", "viscous", "total"];
 

@@ -38,12 +38,12 @@ use sph_core::kernel;
 use sph_core::kinematics;
 use sph_core::motion::Pose;
 use sph_core::series::SeriesWriter;
-use sph_output::SeriesPlot;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{BodyPose, Neighbours, Piston, WallPose};
 use sph_core::world::{archetype, column, Particles};
 use sph_core::StageRegistry;
+use sph_output::SeriesPlot;
 
 /// A wall-pressure extraction method.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]

@@ -1,9 +1,9 @@
 //! Helpers shared by the integration tests: scenario loading with overrides, runs into
 //! fresh temporary folders, and CSV reading for outputs and reference data.
 
-use sph_scenario::overrides::Override;
-use sph_run::runner::{run_keeping_state, RunOptions, Summary};
 use sph_core::Sim;
+use sph_run::runner::{run_keeping_state, RunOptions, Summary};
+use sph_scenario::overrides::Override;
 use sph_scenario::Scenario;
 use std::path::{Path, PathBuf};
 

@@ -13,12 +13,12 @@
 
 use serde::{Deserialize, Serialize};
 use sph_core::components::{Density, Fluid, Position, Velocity};
-use sph_scenario::overrides::Override;
-use sph_run::runner::{run_keeping_state, RunError, RunOptions};
 use sph_core::sim::Sim;
 use sph_core::stage::{Stage, StepError};
 use sph_core::world::{archetype, column, column_mut};
 use sph_core::StageRegistry;
+use sph_run::runner::{run_keeping_state, RunError, RunOptions};
+use sph_scenario::overrides::Override;
 use sph_scenario::Scenario;
 use sph_tests::support::temp_out;
 

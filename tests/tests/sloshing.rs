@@ -5,8 +5,8 @@ use glam::DVec2;
 use sph_core::components::WallPose;
 use sph_core::components::{Mass, PressureSensor};
 use sph_core::kinematics;
-use sph_study::linear_sloshing::{tilted_tank_moment, RectangularTank};
 use sph_core::world::Particles;
+use sph_study::linear_sloshing::{tilted_tank_moment, RectangularTank};
 use sph_tests::stability::{run_hard_case, Bounds, Outcome};
 use sph_tests::support::{load, run_completed, series};
 

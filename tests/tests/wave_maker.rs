@@ -4,8 +4,8 @@
 //! dispersion relation's wavelength (docs/validation.md, "Wave maker").
 
 use sph_core::components::{Fluid, Mass, Position};
-use sph_study::waves::WaveTheory;
 use sph_core::world::{archetype, column};
+use sph_study::waves::WaveTheory;
 use sph_tests::support::{load, run_completed, series};
 use std::f64::consts::PI;
 

@@ -6,9 +6,9 @@ pub mod study;
 
 use clap::{Parser, Subcommand};
 use sph_core::checkpoint::Origin;
-use sph_scenario::overrides::Override;
-use sph_run::runner::{run, RunError, RunOptions};
 use sph_core::StageRegistry;
+use sph_run::runner::{run, RunError, RunOptions};
+use sph_scenario::overrides::Override;
 use sph_scenario::Scenario;
 use std::path::PathBuf;
 use std::process::ExitCode;

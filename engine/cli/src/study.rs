@@ -1,8 +1,8 @@
 //! `engine study FILE`: runs (or resumes) a sensitivity study and writes study.csv,
 //! report.md and the figures (see `sph_core::study`).
 
-use sph_study::study::{run_study, Study, StudyOptions};
 use sph_core::StageRegistry;
+use sph_study::study::{run_study, Study, StudyOptions};
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug, Clone)]

@@ -207,7 +207,6 @@ pub fn ron_options() -> ron::Options {
         .with_default_extension(Extensions::IMPLICIT_SOME | Extensions::UNWRAP_VARIANT_NEWTYPES)
 }
 
-
 #[cfg(test)]
 mod case_tests {
     use super::{camel_case, snake_case};

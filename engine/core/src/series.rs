@@ -2,8 +2,8 @@
 //! per sample, flushed at least every two seconds of wall time so a killed run keeps
 //! what it reported. The rows are also kept in memory for the end-of-run plots.
 
-use crate::checkpoint::Resuming;
 use crate::atomic::write_atomic;
+use crate::checkpoint::Resuming;
 use crate::sim::Sim;
 use crate::stage::StepError;
 use std::fs::{File, OpenOptions};

@@ -1,7 +1,9 @@
 //! Writing the fluid particles' current state as a ParaView frame.
 
-use sph_core::components::{Density, Fluid, NeighbourCount, ParticleId, Position, Pressure, Velocity};
 use crate::vtk::{write_vtp, FrameFields};
+use sph_core::components::{
+    Density, Fluid, NeighbourCount, ParticleId, Position, Pressure, Velocity,
+};
 use sph_core::sim::Sim;
 use sph_core::stage::StepError;
 use sph_core::world::{archetype, column};

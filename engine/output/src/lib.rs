@@ -16,8 +16,13 @@ use std::path::Path;
 /// Plots of a [`SeriesWriter`]'s rows (kept in memory as they are written).
 pub trait SeriesPlot {
     /// Plots the given columns against time into one PNG.
-    fn plot(&self, path: &Path, title: &str, y_label: &str, names: &[&str])
-        -> Result<(), StepError>;
+    fn plot(
+        &self,
+        path: &Path,
+        title: &str,
+        y_label: &str,
+        names: &[&str],
+    ) -> Result<(), StepError>;
 }
 
 impl SeriesPlot for SeriesWriter {

@@ -503,11 +503,7 @@ pub mod tests {
     }
 
     /// The pixels of exactly `colour` inside `frame`'s plotting area, as (column, row).
-    pub fn pixels_of(
-        img: &image::RgbImage,
-        frame: &Frame,
-        colour: RGBColor,
-    ) -> Vec<(i32, i32)> {
+    pub fn pixels_of(img: &image::RgbImage, frame: &Frame, colour: RGBColor) -> Vec<(i32, i32)> {
         let mut out = Vec::new();
         for x in frame.left..=frame.right {
             for y in frame.top..=frame.bottom {

@@ -3,17 +3,17 @@
 //! when the run stops early. A profiled run times the spans with
 //! [`crate::profile::ProfileLayer`]; a traced one writes them with `tracing-chrome`.
 
+use crate::profile::{Profile, ProfileLayer, SpanTime};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use serde::Serialize;
 use sph_core::checkpoint::{Checkpoint, Dec, Origin, Resuming, StateError};
 use sph_core::components::{Fluid, Ghost};
-use sph_output::frame::write_fluid_frame;
-use crate::profile::{Profile, ProfileLayer, SpanTime};
-use sph_scenario::scenario::PipelineEntry;
-use sph_scenario::scenario::Scenario;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, StepError};
 use sph_core::world::count;
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use serde::Serialize;
+use sph_output::frame::write_fluid_frame;
+use sph_scenario::scenario::PipelineEntry;
+use sph_scenario::scenario::Scenario;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -422,8 +422,7 @@ fn run_in_pool(
             stage_times(&profile.report(), &pipeline, &labels);
     }
     let json = serde_json::to_string_pretty(&summary).unwrap_or_default();
-    sph_core::atomic::write_atomic(&out.join("summary.json"), json.as_bytes())
-        .map_err(io_err)?;
+    sph_core::atomic::write_atomic(&out.join("summary.json"), json.as_bytes()).map_err(io_err)?;
     match failure.or(finish_error.map(|(stage, e)| (stage, sim.clock.step, e))) {
         Some((stage, step, error)) => Err(RunError::Step {
             step,

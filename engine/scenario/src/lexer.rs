@@ -288,9 +288,21 @@ mod tests {
         assert_eq!(toks.last(), Some(&(Tok::Close(Shape::Struct), ")", 0)));
         // Unterminated: an error in strict mode, to the end (or one `'`) in lenient.
         for (src, reason, last) in [
-            ("(a: \"x, b: 1)", "unterminated string", (Tok::Str, "\"x, b: 1)", 1)),
-            ("(a: 'x, b: 1)", "unterminated char literal", (Tok::Close(Shape::Struct), ")", 0)),
-            ("(a: r#\"x\")", "unterminated raw string", (Tok::Str, "r#\"x\")", 1)),
+            (
+                "(a: \"x, b: 1)",
+                "unterminated string",
+                (Tok::Str, "\"x, b: 1)", 1),
+            ),
+            (
+                "(a: 'x, b: 1)",
+                "unterminated char literal",
+                (Tok::Close(Shape::Struct), ")", 0),
+            ),
+            (
+                "(a: r#\"x\")",
+                "unterminated raw string",
+                (Tok::Str, "r#\"x\")", 1),
+            ),
         ] {
             assert_eq!(lex(src).unwrap_err().reason, reason);
             assert_eq!(kinds(src).last(), Some(&last), "{src}");

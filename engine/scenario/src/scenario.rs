@@ -6,24 +6,24 @@
 //! RON, unknown stage or field, wrong type, out-of-range value — carries
 //! `file:line:column`, the field and what would be accepted.
 
-use sph_core::components::{BodyPose, Density, Position, Pressure, Velocity, Wall};
-use sph_core::components::{Fluid, Mass, ParticleId, PressureSensor, Tank, WaveGauge};
 use crate::lexer::{lex_lenient, Shape, Tok, Token};
-use sph_core::contract::{Access, Breach};
-use sph_core::kernel::KernelKind;
-use sph_core::motion::{Motion, MotionSeries, MotionSpec, Pose};
 use crate::overrides::{apply_overrides, Override};
-use sph_core::piston::{Piston, PistonSpec, PISTON_WALL};
-use sph_core::registry::{camel_case, snake_case, StageRegistry};
-use sph_core::sim::{Clock, Constants, Resources, Sim, Tait};
-use sph_core::stage::Stage;
-use sph_core::units::Positive;
-use sph_core::registry::ron_options;
 use glam::DVec2;
 use serde::de::{
     self, DeserializeSeed, Deserializer, EnumAccess, MapAccess, VariantAccess, Visitor,
 };
 use serde::{Deserialize, Serialize};
+use sph_core::components::{BodyPose, Density, Position, Pressure, Velocity, Wall};
+use sph_core::components::{Fluid, Mass, ParticleId, PressureSensor, Tank, WaveGauge};
+use sph_core::contract::{Access, Breach};
+use sph_core::kernel::KernelKind;
+use sph_core::motion::{Motion, MotionSeries, MotionSpec, Pose};
+use sph_core::piston::{Piston, PistonSpec, PISTON_WALL};
+use sph_core::registry::ron_options;
+use sph_core::registry::{camel_case, snake_case, StageRegistry};
+use sph_core::sim::{Clock, Constants, Resources, Sim, Tait};
+use sph_core::stage::Stage;
+use sph_core::units::Positive;
 use std::cell::{Cell, RefCell};
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -1273,8 +1273,7 @@ impl<'a> Doc<'a> {
 
     /// Whether token `i` is a field name: an identifier followed by `:`.
     fn is_key(&self, i: usize) -> bool {
-        self.toks[i].tok == Tok::Ident
-            && self.toks.get(i + 1).is_some_and(|t| t.tok == Tok::Colon)
+        self.toks[i].tok == Tok::Ident && self.toks.get(i + 1).is_some_and(|t| t.tok == Tok::Colon)
     }
 
     /// Token of the field `path[last]` inside ... inside the top-level `path[0]`.
@@ -1395,7 +1394,10 @@ impl<'a> Doc<'a> {
     /// identifier `r#name`).
     fn line_col(&self, i: usize) -> (usize, usize) {
         let t = self.toks[i];
-        let raw = self.text.get(t.start..t.end).is_some_and(|s| s.starts_with("r#"));
+        let raw = self
+            .text
+            .get(t.start..t.end)
+            .is_some_and(|s| s.starts_with("r#"));
         let start = t.start + if raw { 2 } else { 0 };
         let before = self.text.get(..start).unwrap_or("");
         let line = before.matches('\n').count() + 1;

@@ -13,14 +13,14 @@
 pub mod figures;
 pub mod metrics;
 
-use sph_scenario::overrides::Override;
-use sph_run::runner::{run_keeping_state, RunError, RunOptions};
-use sph_scenario::scenario::{parse_ron, LoadError};
 use crate::series::read_series;
-use sph_core::StageRegistry;
-use sph_scenario::Scenario;
 use glam::DVec2;
 use serde::Deserialize;
+use sph_core::StageRegistry;
+use sph_run::runner::{run_keeping_state, RunError, RunOptions};
+use sph_scenario::overrides::Override;
+use sph_scenario::scenario::{parse_ron, LoadError};
+use sph_scenario::Scenario;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -503,7 +503,10 @@ fn run_case(
             let mut csv = String::from("x,y\n");
             for (p, _) in sim
                 .world
-                .query::<(&sph_core::components::Position, &sph_core::components::Fluid)>()
+                .query::<(
+                    &sph_core::components::Position,
+                    &sph_core::components::Fluid,
+                )>()
                 .iter()
             {
                 let _ = writeln!(csv, "{},{}", p.0.x, p.0.y);
@@ -865,8 +868,7 @@ fn write_csv(path: &Path, study: &Study, rows: &[Row]) -> Result<(), String> {
     let bytes = w
         .into_inner()
         .map_err(|e| format!("{}: {e}", path.display()))?;
-    sph_core::atomic::write_atomic(path, &bytes)
-        .map_err(|e| format!("{}: {e}", path.display()))
+    sph_core::atomic::write_atomic(path, &bytes).map_err(|e| format!("{}: {e}", path.display()))
 }
 
 /// A number with four significant digits, or `-` when not finite.

@@ -22,11 +22,11 @@
 //! omega.
 
 use crate::linear_sloshing::RectangularTank;
-use sph_output::plot::{plot_series, Series, Style};
-use sph_scenario::overrides::Override;
-use sph_run::runner::{run, RunError, RunOptions, Summary};
 use sph_core::vocab::ArtificialViscosity;
 use sph_core::StageRegistry;
+use sph_output::plot::{plot_series, Series, Style};
+use sph_run::runner::{run, RunError, RunOptions, Summary};
+use sph_scenario::overrides::Override;
 use sph_scenario::Scenario;
 use std::f64::consts::PI;
 use std::fmt::Write as _;

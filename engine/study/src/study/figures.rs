@@ -4,9 +4,9 @@
 
 use super::metrics::pareto_front;
 use super::{scales, Row, Study};
-use sph_output::plot::{plot_series, Series, Style};
 use crate::series::read_series;
 use sph_core::StageRegistry;
+use sph_output::plot::{plot_series, Series, Style};
 use sph_scenario::Scenario;
 use std::path::Path;
 
