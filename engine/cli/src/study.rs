@@ -1,5 +1,5 @@
 //! `engine study FILE`: runs (or resumes) a sensitivity study and writes study.csv,
-//! report.md and the figures (see `sph_core::study`).
+//! report.md and the figures (see `sph_study::study`).
 
 use sph_core::StageRegistry;
 use sph_study::study::{run_study, Study, StudyOptions};

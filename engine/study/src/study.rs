@@ -1,6 +1,6 @@
 //! Sensitivity studies (`engine study scenarios/studies/<name>.ron`): a base scenario,
 //! parameters to vary and metrics to report. Every case is a run of the base scenario
-//! with `--set` overrides ([`crate::overrides`]); cases run side by side, one thread
+//! with `--set` overrides ([`sph_scenario::overrides`]); cases run side by side, one thread
 //! each ([`crate::parallel`]), into `<out>/<case>/`, and a case whose folder already
 //! holds its finished run (same overrides, `summary.json` written) is not run again,
 //! so an interrupted study resumes. The study writes `study.csv` (one row per case:
