@@ -136,7 +136,8 @@ impl StageRegistry {
         self.entries.iter().map(|(k, v)| (k.as_str(), v.summary))
     }
 
-    /// Builds stage `name` from a deserializer positioned at its parameters.
+    /// Builds stage `name` from a deserializer positioned at its parameters (the
+    /// scenario loader, `sph-scenario`, calls it for each pipeline entry).
     pub fn build(
         &self,
         name: &str,

@@ -1,6 +1,7 @@
 //! Time-series CSV files (probes.csv, energy.csv): a header `time,<columns>`, one row
 //! per sample, flushed at least every two seconds of wall time so a killed run keeps
-//! what it reported. The rows are also kept in memory for the end-of-run plots.
+//! what it reported. The rows are also kept in memory for the end-of-run plots
+//! (`sph_output::SeriesPlot`).
 
 use crate::atomic::write_atomic;
 use crate::checkpoint::Resuming;

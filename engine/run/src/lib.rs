@@ -4,5 +4,3 @@
 
 pub mod profile;
 pub mod runner;
-
-pub use runner::{run, run_keeping_state, RunError, RunOptions, Summary};

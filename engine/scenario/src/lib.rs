@@ -7,5 +7,4 @@ mod lexer;
 pub mod overrides;
 pub mod scenario;
 
-pub use overrides::{Override, OverrideError};
-pub use scenario::{parse_ron, LoadError, Scenario};
+pub use scenario::{LoadError, Scenario};

@@ -9,5 +9,3 @@ pub mod series;
 pub mod study;
 pub mod sweep;
 pub mod waves;
-
-pub use study::{run_study, Row, Study, StudyOptions};
