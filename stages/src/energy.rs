@@ -16,6 +16,7 @@ use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::ViscousDissipation;
 use sph_core::world::{sum_fixed, Particles};
 use sph_core::StageRegistry;
+use sph_output::SeriesPlot;
 
 const COLUMNS: [&str; 5] = ["kinetic", "potential", "internal", "viscous", "total"];
 

@@ -43,6 +43,7 @@ use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{BodyPose, Neighbours, Piston, WallPose};
 use sph_core::world::{archetype, column, Particles};
 use sph_core::StageRegistry;
+use sph_output::SeriesPlot;
 
 /// A wall-pressure extraction method.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]

@@ -6,12 +6,12 @@ use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::{Position, Pressure};
 use sph_core::contract::Access;
-use sph_core::output::png::{pressure_colour_range, write_snapshot, Snapshot};
 use sph_core::sim::Sim;
 use sph_core::stage::{Stage, StepError};
 use sph_core::vocab::{WallPose, Walls};
 use sph_core::world::Particles;
 use sph_core::StageRegistry;
+use sph_output::png::{pressure_colour_range, write_snapshot, Snapshot};
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]

@@ -7,13 +7,13 @@ use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::{Density, NeighbourCount, Position, Pressure, Velocity};
 use sph_core::contract::Access;
-use sph_core::frame::write_fluid_frame;
-use sph_core::output::vtk::{write_segments_vtp, PvdIndex};
 use sph_core::series::check_samples;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{WallPose, Walls};
 use sph_core::StageRegistry;
+use sph_output::frame::write_fluid_frame;
+use sph_output::vtk::{write_segments_vtp, PvdIndex};
 
 /// The most frames a run may write.
 const MAX_FRAMES: f64 = 1e5;

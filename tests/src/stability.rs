@@ -5,9 +5,9 @@
 
 use crate::support::{load, nan_max, read_csv, temp_out};
 use sph_core::components::{Density, Position, Velocity};
-use sph_core::runner::{run_keeping_state, RunOptions};
 use sph_core::walls::Walls;
 use sph_core::world::Particles;
+use sph_run::runner::{run_keeping_state, RunOptions};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::{Path, PathBuf};
 

@@ -1,9 +1,10 @@
 //! Helpers shared by the integration tests: scenario loading with overrides, runs into
 //! fresh temporary folders, and CSV reading for outputs and reference data.
 
-use sph_core::overrides::Override;
-use sph_core::runner::{run_keeping_state, RunOptions, Summary};
-use sph_core::{Scenario, Sim};
+use sph_core::Sim;
+use sph_run::runner::{run_keeping_state, RunOptions, Summary};
+use sph_scenario::overrides::Override;
+use sph_scenario::Scenario;
 use std::path::{Path, PathBuf};
 
 /// A fresh, empty output folder under the system temp folder.
@@ -39,9 +40,9 @@ pub fn run_completed(scenario: Scenario, tag: &str, threads: usize) -> (Summary,
 }
 
 /// Numeric rows of a CSV file, skipping `#` comment lines; returns (header, rows)
-/// ([`sph_core::series::read_table`], panicking on error).
+/// ([`sph_study::series::read_table`], panicking on error).
 pub fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
-    sph_core::series::read_table(path).unwrap_or_else(|e| panic!("{e}"))
+    sph_study::series::read_table(path).unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// Column `name` of a CSV against its first column.
@@ -77,7 +78,7 @@ pub fn reference(file: &str) -> Vec<(f64, f64)> {
 }
 
 /// Linear interpolation of a time series at `t` (clamped at the ends).
-pub use sph_core::study::metrics::interpolate;
+pub use sph_study::study::metrics::interpolate;
 
 #[cfg(test)]
 mod tests {

@@ -13,12 +13,13 @@
 
 use serde::{Deserialize, Serialize};
 use sph_core::components::{Density, Fluid, Position, Velocity};
-use sph_core::overrides::Override;
-use sph_core::runner::{run_keeping_state, RunError, RunOptions};
 use sph_core::sim::Sim;
 use sph_core::stage::{Stage, StepError};
 use sph_core::world::{archetype, column, column_mut};
-use sph_core::{Scenario, StageRegistry};
+use sph_core::StageRegistry;
+use sph_run::runner::{run_keeping_state, RunError, RunOptions};
+use sph_scenario::overrides::Override;
+use sph_scenario::Scenario;
 use sph_tests::support::temp_out;
 
 const RHO0: f64 = 1000.0;

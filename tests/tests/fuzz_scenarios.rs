@@ -5,7 +5,7 @@
 //! seconds; `SPH_FUZZ_CASES=200000 cargo test --release -p sph-tests --test
 //! fuzz_scenarios -- --nocapture` runs a longer campaign.
 
-use sph_core::Scenario;
+use sph_scenario::Scenario;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
 const SHIPPED: [(&str, &str); 8] = [

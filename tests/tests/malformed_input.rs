@@ -9,8 +9,8 @@
 //! and the mutations find fields and stages by name, so the table stays right when the
 //! shipped scenario is edited.
 
-use sph_core::overrides::Override;
-use sph_core::{LoadError, Scenario};
+use sph_scenario::overrides::Override;
+use sph_scenario::{LoadError, Scenario};
 use std::time::{Duration, Instant};
 
 const DAM: &str = include_str!("../../scenarios/dam_break.ron");

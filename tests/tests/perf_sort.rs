@@ -161,7 +161,7 @@ fn continuity_written_twice_is_refused_at_load_in_either_order() {
     for (at, second) in [(forces, "Forces"), (probe, "Continuity")] {
         let both = format!("{}        Continuity(),\n{}", &SCENE[..at], &SCENE[at..]);
         let registry = sph_stages::standard_registry();
-        let err = sph_core::Scenario::from_str(&both, "both.ron", &[], &registry)
+        let err = sph_scenario::Scenario::from_str(&both, "both.ron", &[], &registry)
             .expect_err("both write the density rate");
         let shown = err.to_string();
         assert!(shown.contains("remove one of them"), "{shown}");

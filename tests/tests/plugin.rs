@@ -1,8 +1,8 @@
 //! The example plugin stage (`max_speed::MaxSpeed`) runs in a scenario next to
 //! the standard stages, and a registry without it refuses the scenario.
 
-use sph_core::runner::{run, RunOptions};
-use sph_core::Scenario;
+use sph_run::runner::{run, RunOptions};
+use sph_scenario::Scenario;
 use std::path::Path;
 
 const FILE: &str = concat!(

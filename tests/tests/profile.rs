@@ -3,14 +3,14 @@
 //! with the stages' inner spans under them; `--trace` writes the same spans, and both
 //! can be on together. Without the profiler, the summary has no stage times.
 
-use sph_core::runner::{run, RunOptions, StageTime};
+use sph_run::runner::{run, RunOptions, StageTime};
 use sph_tests::support::{load, temp_out};
 
 const DAM: &str = include_str!("../../scenarios/dam_break.ron");
 
 /// A coarse dam break with `Reinitialise()` twice (two Shepard filters in a row: a
 /// second updater of the density is allowed), for a few steps.
-fn scenario() -> sph_core::Scenario {
+fn scenario() -> sph_scenario::Scenario {
     let text = DAM.replacen(
         "Reinitialise(every: 1),",
         "Reinitialise(every: 1), Reinitialise(every: 1),",

@@ -5,8 +5,8 @@
 //! and absurd sizes are refused before the run with a message naming the culprit.
 
 use sph_core::checkpoint::{read_latest, LATEST, PREVIOUS, TEMPORARY};
-use sph_core::runner::{run, RunOptions};
-use sph_core::Scenario;
+use sph_run::runner::{run, RunOptions};
+use sph_scenario::Scenario;
 use sph_tests::support::{load, temp_out};
 use std::path::{Path, PathBuf};
 

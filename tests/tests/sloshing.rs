@@ -5,8 +5,8 @@ use glam::DVec2;
 use sph_core::components::WallPose;
 use sph_core::components::{Mass, PressureSensor};
 use sph_core::kinematics;
-use sph_core::linear_sloshing::{tilted_tank_moment, RectangularTank};
 use sph_core::world::Particles;
+use sph_study::linear_sloshing::{tilted_tank_moment, RectangularTank};
 use sph_tests::stability::{run_hard_case, Bounds, Outcome};
 use sph_tests::support::{load, run_completed, series};
 
@@ -140,7 +140,7 @@ fn small_roll_response_peaks_at_the_first_natural_frequency_and_matches_linear_t
     let sigma1 = 7.238827;
     let ratios = [0.7, 0.94, 0.97, 1.0, 1.03, 1.06, 1.3];
     let omegas: Vec<String> = ratios.iter().map(|r| format!("{}", r * sigma1)).collect();
-    let overrides: Vec<sph_core::overrides::Override> = [
+    let overrides: Vec<sph_scenario::overrides::Override> = [
         "resolution=Spacing(0.016666666666666666)".to_string(),
         "tank.motion=(roll: (amplitude: 0.5, period: 1.0))".to_string(),
         format!(
@@ -153,7 +153,7 @@ fn small_roll_response_peaks_at_the_first_natural_frequency_and_matches_linear_t
     .collect();
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/rolling_tank.ron");
     let out = sph_tests::support::temp_out("roll_sweep");
-    let responses = sph_core::sweep::run_sweep(
+    let responses = sph_study::sweep::run_sweep(
         &path,
         &overrides,
         &sph_stages::standard_registry(),
@@ -170,7 +170,7 @@ fn small_roll_response_peaks_at_the_first_natural_frequency_and_matches_linear_t
     // Peak of the fitted amplitude: the vertex of the parabola through the largest
     // sample and its neighbours. Within 3 % of sigma_1 (the criterion); the
     // same estimate on linear theory (same start and window) is printed beside it.
-    let peak = |amp: &dyn Fn(&sph_core::sweep::Response) -> f64| {
+    let peak = |amp: &dyn Fn(&sph_study::sweep::Response) -> f64| {
         let k = (1..responses.len() - 1)
             .max_by(|&a, &b| amp(&responses[a]).total_cmp(&amp(&responses[b])))
             .unwrap();

@@ -2,8 +2,8 @@
 //! columns in study.csv, finite metrics, figures and report, resume skipping finished
 //! cases, a stopped case as a row, and study-file errors with file:line:column.
 
-use sph_core::overrides::Override;
-use sph_core::study::{run_study, Study, StudyOptions};
+use sph_scenario::overrides::Override;
+use sph_study::study::{run_study, Study, StudyOptions};
 use sph_tests::support::{read_csv, temp_out};
 use std::path::{Path, PathBuf};
 
@@ -23,7 +23,7 @@ fn load(sets: &[&str]) -> Study {
         .unwrap_or_else(|e| panic!("{e}"))
 }
 
-fn run(study: &Study, out: &Path) -> Vec<sph_core::study::Row> {
+fn run(study: &Study, out: &Path) -> Vec<sph_study::study::Row> {
     let opts = StudyOptions {
         workers: 2,
         threads: 1,

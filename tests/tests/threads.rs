@@ -6,8 +6,8 @@
 //! added to scenarios/ without an entry here fails `every_shipped_scenario_is_covered`.
 
 use sph_core::components::{Density, ParticleId, Position, Velocity};
-use sph_core::runner::{run_keeping_state, RunOptions};
 use sph_core::world::Particles;
+use sph_run::runner::{run_keeping_state, RunOptions};
 use sph_tests::stability::quiet;
 use sph_tests::support::{load, temp_out};
 use std::path::{Path, PathBuf};

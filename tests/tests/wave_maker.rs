@@ -4,8 +4,8 @@
 //! dispersion relation's wavelength (docs/validation.md, "Wave maker").
 
 use sph_core::components::{Fluid, Mass, Position};
-use sph_core::waves::WaveTheory;
 use sph_core::world::{archetype, column};
+use sph_study::waves::WaveTheory;
 use sph_tests::support::{load, run_completed, series};
 use std::f64::consts::PI;
 
@@ -110,7 +110,7 @@ fn a_bad_piston_is_refused_with_its_place() {
         ("period: 1.5,", "", "needs `stroke: <m>` and `period: <s>`"),
     ] {
         let text = SCENE.replacen(from, to, 1);
-        let err = sph_core::Scenario::from_str(&text, "wave_maker.ron", &[], &registry)
+        let err = sph_scenario::Scenario::from_str(&text, "wave_maker.ron", &[], &registry)
             .expect_err(expect);
         let msg = err.to_string();
         assert!(msg.contains(expect), "{msg}");

@@ -10,13 +10,13 @@
 
 use serde::{Deserialize, Serialize};
 use sph_core::components::Fluid;
-use sph_core::overrides::Override;
-use sph_core::runner::{run_keeping_state, RunOptions};
 use sph_core::sim::Sim;
 use sph_core::stage::{Stage, StepError};
 use sph_core::vocab::Neighbours;
 use sph_core::world::count;
-use sph_core::Scenario;
+use sph_run::runner::{run_keeping_state, RunOptions};
+use sph_scenario::overrides::Override;
+use sph_scenario::Scenario;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};

@@ -6,9 +6,10 @@ pub mod study;
 
 use clap::{Parser, Subcommand};
 use sph_core::checkpoint::Origin;
-use sph_core::overrides::Override;
-use sph_core::runner::{run, RunError, RunOptions};
-use sph_core::{Scenario, StageRegistry};
+use sph_core::StageRegistry;
+use sph_run::runner::{run, RunError, RunOptions};
+use sph_scenario::overrides::Override;
+use sph_scenario::Scenario;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -241,7 +242,7 @@ pub fn run_scenario(args: &RunArgs, registry: &StageRegistry) -> Result<ExitCode
 /// [`INTERRUPTED`] after a Ctrl-C (with its checkpoint written).
 fn execute(scenario: Scenario, opts: &RunOptions) -> Result<ExitCode, String> {
     let out_dir = &opts.out_dir;
-    let waves = sph_core::waves::WaveTheory::from_scenario(&scenario);
+    let waves = sph_study::waves::WaveTheory::from_scenario(&scenario);
     let result = run(scenario, opts);
     let summary = match &result {
         Ok(s) => s.clone(),
@@ -285,7 +286,7 @@ fn execute(scenario: Scenario, opts: &RunOptions) -> Result<ExitCode, String> {
 /// A piston flume's gauges against Biesel and the dispersion relation: a line on the
 /// terminal and `waves.md` beside `probes.csv`.
 fn report_waves(
-    waves: &sph_core::waves::WaveTheory,
+    waves: &sph_study::waves::WaveTheory,
     out_dir: &std::path::Path,
 ) -> Result<(), String> {
     let probes = out_dir.join("probes.csv");
@@ -294,7 +295,7 @@ fn report_waves(
     }
     let report = waves.measure(&probes)?;
     let path = out_dir.join("waves.md");
-    sph_core::output::atomic::write_atomic(&path, report.markdown().as_bytes())
+    sph_core::atomic::write_atomic(&path, report.markdown().as_bytes())
         .map_err(|e| format!("{}: {e}", path.display()))?;
     println!("{} (waves.md)", report.summary());
     Ok(())
@@ -313,7 +314,7 @@ fn run_sweep(
     });
     let start = std::time::Instant::now();
     let responses =
-        sph_core::sweep::run_sweep(path, overrides, registry, out_dir, workers, &|line| {
+        sph_study::sweep::run_sweep(path, overrides, registry, out_dir, workers, &|line| {
             println!("{line}")
         })?;
     println!(

@@ -1,8 +1,8 @@
 //! `engine study FILE`: runs (or resumes) a sensitivity study and writes study.csv,
-//! report.md and the figures (see `sph_core::study`).
+//! report.md and the figures (see `sph_study::study`).
 
-use sph_core::study::{run_study, Study, StudyOptions};
 use sph_core::StageRegistry;
+use sph_study::study::{run_study, Study, StudyOptions};
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug, Clone)]
@@ -38,7 +38,7 @@ pub fn main(args: &StudyArgs, registry: &StageRegistry) -> Result<(), String> {
     // synchronisation, a small case split over threads does not (docs/studies.md).
     let workers = args
         .workers
-        .unwrap_or_else(|| sph_core::parallel::default_workers(study.cases.len()));
+        .unwrap_or_else(|| sph_study::parallel::default_workers(study.cases.len()));
     let cores = std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get);
     let threads = args.threads.unwrap_or((cores / workers).max(1));
     let out = args

@@ -6,7 +6,7 @@
 //! tank is at x = P + (s, hv) + R(theta) (q - P) in the world, P the pivot, (s, hv) the
 //! sway and heave, theta the roll angle (counter-clockwise positive).
 
-use crate::scenario::Positive;
+use crate::units::Positive;
 use glam::DVec2;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;

@@ -6,7 +6,7 @@
 //! mirror across it with its velocity, and a probe finds it by its component.
 
 use crate::motion::{HarmonicSpec, Motion, MotionSeries, MotionSpec};
-use crate::scenario::Positive;
+use crate::units::Positive;
 use glam::DVec2;
 use serde::{Deserialize, Serialize};
 use std::path::Path;

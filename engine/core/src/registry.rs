@@ -112,7 +112,7 @@ impl StageRegistry {
             let params: P = erased_serde::deserialize(de)?;
             // As the loader reads them: a term list's `Name(field: value)` without the
             // newtype's inner parentheses.
-            let resolved = crate::scenario::ron_options()
+            let resolved = ron_options()
                 .to_string(&params)
                 .map_err(serde::de::Error::custom)?;
             let stage = build(params).map_err(serde::de::Error::custom)?;
@@ -136,8 +136,9 @@ impl StageRegistry {
         self.entries.iter().map(|(k, v)| (k.as_str(), v.summary))
     }
 
-    /// Builds stage `name` from a deserializer positioned at its parameters.
-    pub(crate) fn build(
+    /// Builds stage `name` from a deserializer positioned at its parameters (the
+    /// scenario loader, `sph-scenario`, calls it for each pipeline entry).
+    pub fn build(
         &self,
         name: &str,
         de: &mut dyn erased_serde::Deserializer,
@@ -196,6 +197,15 @@ pub fn camel_case(name: &str) -> String {
             })
         })
         .collect()
+}
+
+/// RON options: `IMPLICIT_SOME` lets optional fields be written without `Some(..)`;
+/// `UNWRAP_VARIANT_NEWTYPES` lets a variant holding a parameter struct be written
+/// `Name(field: value)` (a pair term in `Forces(terms: [...])`), not `Name((..))`.
+pub fn ron_options() -> ron::Options {
+    use ron::extensions::Extensions;
+    ron::Options::default()
+        .with_default_extension(Extensions::IMPLICIT_SOME | Extensions::UNWRAP_VARIANT_NEWTYPES)
 }
 
 #[cfg(test)]

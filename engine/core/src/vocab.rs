@@ -240,7 +240,7 @@ pub struct ViscousDissipation {
 /// Monaghan's artificial viscosity coefficients a momentum stage runs with, exposed in
 /// its declared contract ([`crate::contract::Access::exposes`]): a sweep damps its
 /// linear-theory reference by the viscosity they imply
-/// ([`crate::Scenario::exposed`]).
+/// (`sph_scenario::Scenario::exposed`).
 #[derive(Debug, Default, Clone, Copy, PartialEq)]
 pub struct ArtificialViscosity {
     /// Linear coefficient alpha.

@@ -330,7 +330,7 @@ mod tests {
     fn walls_are_read_in_spawn_order_and_follow_the_kinematics() {
         use crate::components::{BodyPose, Tank};
         use crate::motion::{HarmonicSpec, Motion, MotionSpec};
-        use crate::scenario::Positive;
+        use crate::units::Positive;
         let mut world = tank();
         let spec = MotionSpec {
             sway: Some(HarmonicSpec {

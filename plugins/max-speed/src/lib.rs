@@ -2,6 +2,10 @@
 //! `stages/`, the worked example of how to add a stage. `src/main.rs` is the `engine`
 //! command with it registered: `cargo run --release -p max-speed -- plugins/max-speed/max_speed.ron`.
 //!
+//! The library uses `sph-core` only, the plugin-facing crate (a stage that plots its
+//! series adds `sph-output` for `SeriesPlot`); `sph-stages` and `engine` are for the
+//! binary.
+//!
 //! `MaxSpeed` measures the largest fluid speed each step, keeps it in the run's
 //! diagnostics (`summary.json`) and writes it to `max_speed.csv` every `interval`
 //! seconds of simulated time. A scenario uses it like any standard stage:

@@ -3,17 +3,17 @@
 //! when the run stops early. A profiled run times the spans with
 //! [`crate::profile::ProfileLayer`]; a traced one writes them with `tracing-chrome`.
 
-use crate::checkpoint::{Checkpoint, Dec, Origin, Resuming, StateError};
-use crate::components::{Fluid, Ghost};
-use crate::frame::write_fluid_frame;
 use crate::profile::{Profile, ProfileLayer, SpanTime};
-use crate::scenario::PipelineEntry;
-use crate::scenario::Scenario;
-use crate::sim::Sim;
-use crate::stage::{SetupError, StepError};
-use crate::world::count;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
+use sph_core::checkpoint::{Checkpoint, Dec, Origin, Resuming, StateError};
+use sph_core::components::{Fluid, Ghost};
+use sph_core::sim::Sim;
+use sph_core::stage::{SetupError, StepError};
+use sph_core::world::count;
+use sph_output::frame::write_fluid_frame;
+use sph_scenario::scenario::PipelineEntry;
+use sph_scenario::scenario::Scenario;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -36,7 +36,7 @@ pub struct RunOptions {
     pub checkpoint_every: Option<f64>,
     /// Stop once the simulated time reaches this [s], writing a checkpoint.
     pub stop_at: Option<f64>,
-    /// Continue from this checkpoint ([`crate::checkpoint::read_latest`]); the scenario
+    /// Continue from this checkpoint ([`sph_core::checkpoint::read_latest`]); the scenario
     /// must be the one it was written for.
     pub resume: Option<Checkpoint>,
     /// Set (e.g. by a Ctrl-C handler) to stop the run with a checkpoint.
@@ -254,7 +254,7 @@ fn run_in_pool(
     // A stale frame from an earlier failed run in this folder would mislead.
     let _ = std::fs::remove_file(out.join("unstable.vtp"));
     let resolved = scenario.resolved_ron();
-    let fingerprint = crate::checkpoint::fingerprint(&resolved);
+    let fingerprint = sph_core::checkpoint::fingerprint(&resolved);
     if let Some(c) = &opts.resume {
         if c.fingerprint != fingerprint {
             return Err(RunError::Checkpoint {
@@ -263,7 +263,7 @@ fn run_in_pool(
             });
         }
     }
-    crate::output::atomic::write_atomic(&out.join("scenario.resolved.ron"), resolved.as_bytes())
+    sph_core::atomic::write_atomic(&out.join("scenario.resolved.ron"), resolved.as_bytes())
         .map_err(io_err)?;
 
     let mut sim = scenario.build_sim(out.clone());
@@ -422,8 +422,7 @@ fn run_in_pool(
             stage_times(&profile.report(), &pipeline, &labels);
     }
     let json = serde_json::to_string_pretty(&summary).unwrap_or_default();
-    crate::output::atomic::write_atomic(&out.join("summary.json"), json.as_bytes())
-        .map_err(io_err)?;
+    sph_core::atomic::write_atomic(&out.join("summary.json"), json.as_bytes()).map_err(io_err)?;
     match failure.or(finish_error.map(|(stage, e)| (stage, sim.clock.step, e))) {
         Some((stage, step, error)) => Err(RunError::Step {
             step,
@@ -540,7 +539,7 @@ fn checkpoint(
     opts: &RunOptions,
 ) -> Result<(), StepError> {
     let c = &sim.clock;
-    let mut e = crate::checkpoint::begin(c.step, c.time, fingerprint, &opts.origin);
+    let mut e = sph_core::checkpoint::begin(c.step, c.time, fingerprint, &opts.origin);
     e.f64(c.time);
     e.f64(c.dt);
     e.u64(c.step);
@@ -550,7 +549,7 @@ fn checkpoint(
         e.str(k);
         e.f64(*v);
     }
-    crate::checkpoint::put_particles(&mut e, &sim.world);
+    sph_core::checkpoint::put_particles(&mut e, &sim.world);
     e.u64(pipeline.len() as u64);
     for entry in pipeline.iter_mut() {
         e.str(&entry.name);
@@ -560,8 +559,8 @@ fn checkpoint(
         e.f64(0.0);
         e.bytes(&entry.stage.save_state(sim)?);
     }
-    let bytes = crate::checkpoint::seal(e);
-    crate::checkpoint::write(&opts.out_dir, &bytes).map_err(|message| StepError::Output {
+    let bytes = sph_core::checkpoint::seal(e);
+    sph_core::checkpoint::write(&opts.out_dir, &bytes).map_err(|message| StepError::Output {
         path: "checkpoint".into(),
         message,
     })
@@ -579,7 +578,7 @@ fn restore(
     sim.clock.dt = d.f64()?;
     sim.clock.step = d.u64()?;
     // The scene follows the clock: walls and pistons where they were at that time.
-    crate::kinematics::place(&sim.world, sim.clock.time);
+    sph_core::kinematics::place(&sim.world, sim.clock.time);
     *ghost_sum = d.f64()?;
     let n = d.len(16)?;
     sim.diagnostics.clear();
@@ -587,7 +586,7 @@ fn restore(
         let k = d.str()?;
         sim.diagnostics.insert(k, d.f64()?);
     }
-    crate::checkpoint::get_particles(&mut d, &mut sim.world)?;
+    sph_core::checkpoint::get_particles(&mut d, &mut sim.world)?;
     let n = d.len(8)?;
     if n != pipeline.len() {
         return Err(StateError::Mismatch(format!(

@@ -4,9 +4,10 @@
 
 use super::metrics::pareto_front;
 use super::{scales, Row, Study};
-use crate::output::plot::{plot_series, Series, Style};
 use crate::series::read_series;
-use crate::{Scenario, StageRegistry};
+use sph_core::StageRegistry;
+use sph_output::plot::{plot_series, Series, Style};
+use sph_scenario::Scenario;
 use std::path::Path;
 
 /// Draws every figure into `out_dir`.
@@ -154,8 +155,8 @@ pub fn snapshot_grid(path: &Path, panels: &[(String, std::path::PathBuf)]) -> Re
     let label = 36;
     let cols = images.len().min(2) as u32;
     let rows = (images.len() as u32).div_ceil(cols);
-    crate::output::plot::render_png(path, (cols * w, rows * (h + label)), |root| {
-        let style = TextStyle::from((crate::output::plot::FONT_FAMILY, 26).into_font());
+    sph_output::plot::render_png(path, (cols * w, rows * (h + label)), |root| {
+        let style = TextStyle::from((sph_output::plot::FONT_FAMILY, 26).into_font());
         for (k, (name, im)) in images.iter().enumerate() {
             let (x0, y0) = ((k as u32 % cols) * w, (k as u32 / cols) * (h + label));
             root.draw_text(name, &style, (x0 as i32 + 12, y0 as i32 + 6))?;

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec2;
 
-use super::atomic::{write_atomic, write_atomic_with};
+use sph_core::atomic::{write_atomic, write_atomic_with};
 
 /// Per-particle arrays of one frame; every non-empty array has one entry per position.
 pub struct FrameFields<'a> {

@@ -9,7 +9,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use super::atomic::write_atomic_with;
+use sph_core::atomic::write_atomic_with;
 
 /// Default plot size in pixels.
 pub const PLOT_SIZE: (u32, u32) = (800, 500);
@@ -84,7 +84,7 @@ pub fn plot_series(
 /// Where [`plot_series`] put the data: the axis ranges and the plotting area's first
 /// and last pixel column and row (inclusive; `bottom` is where `y.0` lies).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct Frame {
+pub struct Frame {
     pub x: (f64, f64),
     pub y: (f64, f64),
     pub left: i32,
@@ -109,7 +109,7 @@ impl Frame {
 
 /// [`plot_series`], returning where the data went (for the tests that read the
 /// drawing back).
-pub(crate) fn draw_series_plot(
+pub fn draw_series_plot(
     path: &Path,
     title: &str,
     x_label: &str,
@@ -207,7 +207,7 @@ pub(crate) fn draw_series_plot(
 /// crossing many columns stays connected, and every sample lies on its column's span:
 /// the drawn extremes are the samples' extremes, to the rounding of one pixel.
 /// Non-finite points break the line (a lone finite point is one pixel).
-pub(crate) struct Envelope {
+pub struct Envelope {
     left: i32,
     top: i32,
     bottom: i32,
@@ -367,7 +367,7 @@ fn draw_legend(
 }
 
 /// Range covering `values` (finite), padded by `pad` of the span; never empty or inverted.
-pub(crate) fn axis_range(values: impl Iterator<Item = f64>, pad: f64) -> (f64, f64) {
+pub fn axis_range(values: impl Iterator<Item = f64>, pad: f64) -> (f64, f64) {
     let (lo, hi) = values
         .filter(|v| v.is_finite())
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
@@ -391,7 +391,7 @@ pub(crate) fn axis_range(values: impl Iterator<Item = f64>, pad: f64) -> (f64, f
 }
 
 /// Formats a tick value for an axis spanning `span`: fixed decimals, or scientific for very large/small magnitudes.
-pub(crate) fn format_number(v: f64, span: f64) -> String {
+pub fn format_number(v: f64, span: f64) -> String {
     if !v.is_finite() {
         return v.to_string();
     }
@@ -419,7 +419,7 @@ pub(crate) fn format_number(v: f64, span: f64) -> String {
 }
 
 /// Rough pixel width of the widest tick label on an axis from `lo` to `hi`.
-pub(crate) fn tick_label_width(lo: f64, hi: f64, font_px: u32) -> u32 {
+pub fn tick_label_width(lo: f64, hi: f64, font_px: u32) -> u32 {
     let chars = (0..=10)
         .map(|i| {
             format_number(lo + (hi - lo) * f64::from(i) / 10.0, hi - lo)
@@ -432,9 +432,9 @@ pub(crate) fn tick_label_width(lo: f64, hi: f64, font_px: u32) -> u32 {
 }
 
 /// Font family name the embedded DejaVu Sans is registered under.
-pub(crate) const FONT_FAMILY: &str = "sans-serif";
+pub const FONT_FAMILY: &str = "sans-serif";
 
-static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
+static FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
 
 /// Registers the embedded font with plotters once; later calls return the first outcome.
 fn ensure_font() -> bool {
@@ -444,10 +444,10 @@ fn ensure_font() -> bool {
     })
 }
 
-pub(crate) type Root<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+pub type Root<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
 
 /// Renders a `size` PNG with `draw` into a temporary file and renames it onto `path`.
-pub(crate) fn render_png<F>(path: &Path, size: (u32, u32), draw: F) -> Result<(), PlotError>
+pub fn render_png<F>(path: &Path, size: (u32, u32), draw: F) -> Result<(), PlotError>
 where
     F: FnOnce(&Root<'_>) -> Result<(), Box<dyn StdError>>,
 {
@@ -477,11 +477,11 @@ where
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
+pub mod tests {
     use super::*;
     use std::fs;
 
-    pub(crate) fn test_dir(name: &str) -> PathBuf {
+    pub fn test_dir(name: &str) -> PathBuf {
         let dir = std::env::temp_dir().join(format!("sph_core_{name}_{}", std::process::id()));
         let _ = fs::remove_dir_all(&dir);
         fs::create_dir_all(&dir).unwrap();
@@ -490,7 +490,7 @@ pub(crate) mod tests {
 
     /// Decodes `path`, asserting it is a PNG of the given size with something drawn on
     /// its white background.
-    pub(crate) fn assert_png(path: &Path, size: (u32, u32)) -> image::RgbImage {
+    pub fn assert_png(path: &Path, size: (u32, u32)) -> image::RgbImage {
         let bytes = fs::read(path).unwrap();
         assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{}", path.display());
         let img = image::load_from_memory_with_format(&bytes, image::ImageFormat::Png)
@@ -503,11 +503,7 @@ pub(crate) mod tests {
     }
 
     /// The pixels of exactly `colour` inside `frame`'s plotting area, as (column, row).
-    pub(crate) fn pixels_of(
-        img: &image::RgbImage,
-        frame: &Frame,
-        colour: RGBColor,
-    ) -> Vec<(i32, i32)> {
+    pub fn pixels_of(img: &image::RgbImage, frame: &Frame, colour: RGBColor) -> Vec<(i32, i32)> {
         let mut out = Vec::new();
         for x in frame.left..=frame.right {
             for y in frame.top..=frame.bottom {

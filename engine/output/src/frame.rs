@@ -1,10 +1,12 @@
 //! Writing the fluid particles' current state as a ParaView frame.
 
-use crate::components::{Density, Fluid, NeighbourCount, ParticleId, Position, Pressure, Velocity};
-use crate::output::vtk::{write_vtp, FrameFields};
-use crate::sim::Sim;
-use crate::stage::StepError;
-use crate::world::{archetype, column};
+use crate::vtk::{write_vtp, FrameFields};
+use sph_core::components::{
+    Density, Fluid, NeighbourCount, ParticleId, Position, Pressure, Velocity,
+};
+use sph_core::sim::Sim;
+use sph_core::stage::StepError;
+use sph_core::world::{archetype, column};
 use std::path::Path;
 
 /// Writes the fluid particles (position, velocity, density, pressure, `particle_id`

@@ -1,6 +1,6 @@
 //! Sensitivity studies (`engine study scenarios/studies/<name>.ron`): a base scenario,
 //! parameters to vary and metrics to report. Every case is a run of the base scenario
-//! with `--set` overrides ([`crate::overrides`]); cases run side by side, one thread
+//! with `--set` overrides ([`sph_scenario::overrides`]); cases run side by side, one thread
 //! each ([`crate::parallel`]), into `<out>/<case>/`, and a case whose folder already
 //! holds its finished run (same overrides, `summary.json` written) is not run again,
 //! so an interrupted study resumes. The study writes `study.csv` (one row per case:
@@ -13,13 +13,14 @@
 pub mod figures;
 pub mod metrics;
 
-use crate::overrides::Override;
-use crate::runner::{run_keeping_state, RunError, RunOptions};
-use crate::scenario::{parse_ron, LoadError};
 use crate::series::read_series;
-use crate::{Scenario, StageRegistry};
 use glam::DVec2;
 use serde::Deserialize;
+use sph_core::StageRegistry;
+use sph_run::runner::{run_keeping_state, RunError, RunOptions};
+use sph_scenario::overrides::Override;
+use sph_scenario::scenario::{parse_ron, LoadError};
+use sph_scenario::Scenario;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -492,7 +493,7 @@ fn run_case(
     for stale in ["summary.json", "final_particles.csv"] {
         let _ = std::fs::remove_file(dir.join(stale));
     }
-    crate::output::atomic::write_atomic(&dir.join("case.txt"), case_text(case).as_bytes())
+    sph_core::atomic::write_atomic(&dir.join("case.txt"), case_text(case).as_bytes())
         .map_err(|e| format!("{}: {e}", dir.display()))?;
     let scenario =
         Scenario::load(&study.scenario, &case.overrides, registry).map_err(|e| e.to_string())?;
@@ -502,13 +503,16 @@ fn run_case(
             let mut csv = String::from("x,y\n");
             for (p, _) in sim
                 .world
-                .query::<(&crate::components::Position, &crate::components::Fluid)>()
+                .query::<(
+                    &sph_core::components::Position,
+                    &sph_core::components::Fluid,
+                )>()
                 .iter()
             {
                 let _ = writeln!(csv, "{},{}", p.0.x, p.0.y);
             }
             let path = dir.join("final_particles.csv");
-            crate::output::atomic::write_atomic(&path, csv.as_bytes())
+            sph_core::atomic::write_atomic(&path, csv.as_bytes())
                 .map_err(|e| format!("{}: {e}", path.display()))
         }
         Err(RunError::Step { .. }) => Ok(()),
@@ -864,8 +868,7 @@ fn write_csv(path: &Path, study: &Study, rows: &[Row]) -> Result<(), String> {
     let bytes = w
         .into_inner()
         .map_err(|e| format!("{}: {e}", path.display()))?;
-    crate::output::atomic::write_atomic(path, &bytes)
-        .map_err(|e| format!("{}: {e}", path.display()))
+    sph_core::atomic::write_atomic(path, &bytes).map_err(|e| format!("{}: {e}", path.display()))
 }
 
 /// A number with four significant digits, or `-` when not finite.
@@ -954,7 +957,7 @@ fn write_report(
         }
     }
     let path = out_dir.join("report.md");
-    crate::output::atomic::write_atomic(&path, md.as_bytes())
+    sph_core::atomic::write_atomic(&path, md.as_bytes())
         .map_err(|e| format!("{}: {e}", path.display()))
 }
 

@@ -22,11 +22,12 @@
 //! omega.
 
 use crate::linear_sloshing::RectangularTank;
-use crate::output::plot::{plot_series, Series, Style};
-use crate::overrides::Override;
-use crate::runner::{run, RunError, RunOptions, Summary};
-use crate::vocab::ArtificialViscosity;
-use crate::{Scenario, StageRegistry};
+use sph_core::vocab::ArtificialViscosity;
+use sph_core::StageRegistry;
+use sph_output::plot::{plot_series, Series, Style};
+use sph_run::runner::{run, RunError, RunOptions, Summary};
+use sph_scenario::overrides::Override;
+use sph_scenario::Scenario;
 use std::f64::consts::PI;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -286,7 +287,7 @@ fn write_response(out_dir: &Path, base: &Scenario, responses: &[Response]) -> Re
         );
     }
     let csv_path = out_dir.join("response.csv");
-    crate::output::atomic::write_atomic(&csv_path, csv.as_bytes())
+    sph_core::atomic::write_atomic(&csv_path, csv.as_bytes())
         .map_err(|e| format!("{}: {e}", csv_path.display()))?;
     if responses.is_empty() {
         return Ok(());

@@ -6,45 +6,30 @@
 //! RON, unknown stage or field, wrong type, out-of-range value — carries
 //! `file:line:column`, the field and what would be accepted.
 
-use crate::components::{BodyPose, Density, Position, Pressure, Velocity, Wall};
-use crate::components::{Fluid, Mass, ParticleId, PressureSensor, Tank, WaveGauge};
-use crate::contract::{Access, Breach};
-use crate::kernel::KernelKind;
-use crate::motion::{Motion, MotionSeries, MotionSpec, Pose};
+use crate::lexer::{lex_lenient, Shape, Tok, Token};
 use crate::overrides::{apply_overrides, Override};
-use crate::piston::{Piston, PistonSpec, PISTON_WALL};
-use crate::registry::{camel_case, snake_case, StageRegistry};
-use crate::sim::{Clock, Constants, Resources, Sim, Tait};
-use crate::stage::Stage;
 use glam::DVec2;
 use serde::de::{
     self, DeserializeSeed, Deserializer, EnumAccess, MapAccess, VariantAccess, Visitor,
 };
 use serde::{Deserialize, Serialize};
+use sph_core::components::{BodyPose, Density, Position, Pressure, Velocity, Wall};
+use sph_core::components::{Fluid, Mass, ParticleId, PressureSensor, Tank, WaveGauge};
+use sph_core::contract::{Access, Breach};
+use sph_core::kernel::KernelKind;
+use sph_core::motion::{Motion, MotionSeries, MotionSpec, Pose};
+use sph_core::piston::{Piston, PistonSpec, PISTON_WALL};
+use sph_core::registry::ron_options;
+use sph_core::registry::{camel_case, snake_case, StageRegistry};
+use sph_core::sim::{Clock, Constants, Resources, Sim, Tait};
+use sph_core::stage::Stage;
+use sph_core::units::Positive;
 use std::cell::{Cell, RefCell};
 use std::fmt;
 use std::path::{Path, PathBuf};
 
 /// The largest particle count a scenario may ask for; checked before any allocation.
 pub const MAX_PARTICLES: f64 = 20e6;
-
-/// A number that must be > 0.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
-#[serde(transparent)]
-pub struct Positive(pub f64);
-
-impl<'de> Deserialize<'de> for Positive {
-    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        let v = f64::deserialize(d)?;
-        if v > 0.0 && v.is_finite() {
-            Ok(Positive(v))
-        } else {
-            Err(de::Error::custom(format!(
-                "{v} is out of range; accepted: a finite number > 0"
-            )))
-        }
-    }
-}
 
 /// Smoothing length as a ratio to the particle spacing, accepted in [0.5, 3].
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
@@ -486,15 +471,6 @@ pub fn parse_ron<T: serde::de::DeserializeOwned>(text: &str, file: &str) -> Resu
         .map_err(|e| parse_error(&Doc::new(text), file, &e))
 }
 
-/// RON options: `IMPLICIT_SOME` lets optional fields be written without `Some(..)`;
-/// `UNWRAP_VARIANT_NEWTYPES` lets a variant holding a parameter struct be written
-/// `Name(field: value)` (a pair term in `Forces(terms: [...])`), not `Name((..))`.
-pub(crate) fn ron_options() -> ron::Options {
-    use ron::extensions::Extensions;
-    ron::Options::default()
-        .with_default_extension(Extensions::IMPLICIT_SOME | Extensions::UNWRAP_VARIANT_NEWTYPES)
-}
-
 impl Scenario {
     /// Reads, patches with `--set` overrides, parses and validates a scenario file.
     pub fn load(
@@ -569,7 +545,7 @@ impl Scenario {
     }
 
     /// The value of type `T` a stage of the pipeline exposes ([`Access::exposes`]), e.g.
-    /// the artificial viscosity ([`crate::vocab::ArtificialViscosity`]): the first stage
+    /// the artificial viscosity ([`sph_core::vocab::ArtificialViscosity`]): the first stage
     /// in the list that exposes one.
     pub fn exposed<T: std::any::Any>(&self) -> Option<&T> {
         self.spec
@@ -778,7 +754,7 @@ impl Scenario {
             },));
         }
         // Everything where its motion has it at t = 0.
-        crate::kinematics::place(&world, 0.0);
+        sph_core::kinematics::place(&world, 0.0);
         Sim {
             world,
             clock: Clock {
@@ -1002,11 +978,11 @@ fn validate(spec: ScenarioSpec, at: &Locator, source: PathBuf) -> Result<Scenari
     Ok(scenario)
 }
 
-/// The declared contracts over the whole pipeline ([`crate::contract::check`]), as an
+/// The declared contracts over the whole pipeline ([`sph_core::contract::check`]), as an
 /// error placed at the offending stage's entry.
 fn check_contracts(pipeline: &[PipelineEntry], at: &Locator) -> Result<(), LoadError> {
     let stages = pipeline.iter().map(|e| (&e.access, e.every));
-    let Err(breach) = crate::contract::check(stages) else {
+    let Err(breach) = sph_core::contract::check(stages) else {
         return Ok(());
     };
     let entry = |k: usize| at.doc.element(&["pipeline"], k, "");
@@ -1272,29 +1248,6 @@ fn unknown_field(message: &str) -> Option<String> {
     (!name.is_empty()).then(|| name.to_string())
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Kind {
-    Ident,
-    Colon,
-    /// `(`, `[` or `{`.
-    Open,
-    /// `)`, `]` or `}`.
-    Close,
-    Comma,
-    Str,
-    Other,
-}
-
-/// A token of the scenario text: byte range and nesting depth (the number of groups
-/// open around it; an opening or closing bracket has the depth outside its group).
-#[derive(Clone, Copy, Debug)]
-struct Token {
-    kind: Kind,
-    start: usize,
-    end: usize,
-    depth: usize,
-}
-
 /// The scenario text as tokens, comments and whitespace left out, so that places in it
 /// can be found by structure: the `name:` of a field, the n-th element of a list.
 /// Lenient: any text tokenizes (unterminated strings and comments run to the end).
@@ -1307,20 +1260,20 @@ impl<'a> Doc<'a> {
     fn new(text: &'a str) -> Self {
         Self {
             text,
-            toks: tokenize(text),
+            toks: lex_lenient(text),
         }
     }
 
     /// The text of token `i`.
     fn name(&self, i: usize) -> &str {
         let t = self.toks[i];
-        self.text.get(t.start..t.end).unwrap_or("")
+        let name = self.text.get(t.start..t.end).unwrap_or("");
+        name.strip_prefix("r#").unwrap_or(name)
     }
 
     /// Whether token `i` is a field name: an identifier followed by `:`.
     fn is_key(&self, i: usize) -> bool {
-        self.toks[i].kind == Kind::Ident
-            && self.toks.get(i + 1).is_some_and(|t| t.kind == Kind::Colon)
+        self.toks[i].tok == Tok::Ident && self.toks.get(i + 1).is_some_and(|t| t.tok == Tok::Colon)
     }
 
     /// Token of the field `path[last]` inside ... inside the top-level `path[0]`.
@@ -1344,8 +1297,8 @@ impl<'a> Doc<'a> {
         (from..self.toks.len())
             .find(|&j| {
                 let t = self.toks[j];
-                (t.kind == Kind::Comma && t.depth == depth)
-                    || (t.kind == Kind::Close && t.depth < depth)
+                (t.tok == Tok::Comma && t.depth == depth)
+                    || (matches!(t.tok, Tok::Close(_)) && t.depth < depth)
             })
             .unwrap_or(self.toks.len())
     }
@@ -1355,7 +1308,7 @@ impl<'a> Doc<'a> {
     fn element(&self, path: &[&str], n: usize, key: &str) -> Option<usize> {
         let open = self.key(path)? + 2;
         let list = self.toks.get(open)?;
-        if list.kind != Kind::Open || self.name(open) != "[" {
+        if list.tok != Tok::Open(Shape::List) {
             return None;
         }
         let depth = list.depth + 1;
@@ -1365,7 +1318,7 @@ impl<'a> Doc<'a> {
             if t.depth < depth {
                 return None;
             }
-            if t.kind == Kind::Comma && t.depth == depth {
+            if t.tok == Tok::Comma && t.depth == depth {
                 count += 1;
                 at_start = true;
             } else if at_start {
@@ -1381,9 +1334,9 @@ impl<'a> Doc<'a> {
     /// Token of field `key` directly inside the struct starting at token `start`
     /// (`(...)` or `Name(...)`).
     fn key_within(&self, start: usize, key: &str) -> Option<usize> {
-        let open = match self.toks[start].kind {
-            Kind::Open => start,
-            Kind::Ident if self.toks.get(start + 1)?.kind == Kind::Open => start + 1,
+        let open = match self.toks[start].tok {
+            Tok::Open(_) => start,
+            Tok::Ident if matches!(self.toks.get(start + 1)?.tok, Tok::Open(_)) => start + 1,
             _ => return None,
         };
         let depth = self.toks[open].depth + 1;
@@ -1401,17 +1354,17 @@ impl<'a> Doc<'a> {
             if t.start >= offset {
                 break;
             }
-            match t.kind {
-                Kind::Open => stack.push(None),
-                Kind::Close if stack.len() > 1 => {
+            match t.tok {
+                Tok::Open(_) => stack.push(None),
+                Tok::Close(_) if stack.len() > 1 => {
                     stack.pop();
                 }
-                Kind::Comma => {
+                Tok::Comma => {
                     if let Some(top) = stack.last_mut() {
                         *top = None;
                     }
                 }
-                Kind::Ident if self.is_key(i) => {
+                Tok::Ident if self.is_key(i) => {
                     if let Some(top) = stack.last_mut() {
                         *top = Some(i);
                     }
@@ -1437,204 +1390,20 @@ impl<'a> Doc<'a> {
         self.text.len()
     }
 
-    /// 1-based line and column (in characters) of token `i`.
+    /// 1-based line and column (in characters) of token `i` (of the name of a raw
+    /// identifier `r#name`).
     fn line_col(&self, i: usize) -> (usize, usize) {
-        let start = self.toks[i].start;
+        let t = self.toks[i];
+        let raw = self
+            .text
+            .get(t.start..t.end)
+            .is_some_and(|s| s.starts_with("r#"));
+        let start = t.start + if raw { 2 } else { 0 };
         let before = self.text.get(..start).unwrap_or("");
         let line = before.matches('\n').count() + 1;
         let line_start = before.rfind('\n').map_or(0, |n| n + 1);
         (line, before[line_start..].chars().count() + 1)
     }
-}
-
-/// Splits RON text into tokens, skipping whitespace, `//` and (nested) `/* */`
-/// comments; strings (plain, byte and raw) and character literals are single tokens.
-fn tokenize(text: &str) -> Vec<Token> {
-    let b = text.as_bytes();
-    let len = b.len();
-    let mut toks = Vec::new();
-    let (mut i, mut depth) = (0, 0usize);
-    while i < len {
-        let start = i;
-        let c = b[i];
-        let next = b.get(i + 1).copied();
-        let kind = match c {
-            _ if c.is_ascii_whitespace() => {
-                i += 1;
-                continue;
-            }
-            b'/' if next == Some(b'/') => {
-                i = b[i..]
-                    .iter()
-                    .position(|&x| x == b'\n')
-                    .map_or(len, |n| i + n);
-                continue;
-            }
-            b'/' if next == Some(b'*') => {
-                i = block_comment_end(b, i);
-                continue;
-            }
-            b'"' => {
-                i = string_end(b, i);
-                Kind::Str
-            }
-            b'b' if next == Some(b'"') => {
-                i = string_end(b, i + 1);
-                Kind::Str
-            }
-            b'r' | b'b' if raw_string_end(b, i).is_some() => {
-                i = raw_string_end(b, i).unwrap_or(len);
-                Kind::Str
-            }
-            b'r' if next == Some(b'#') && b.get(i + 2).is_some_and(|&x| is_ident_byte(x)) => {
-                // A raw identifier `r#name`: the token is the name.
-                i += 2;
-                let name_start = i;
-                while i < len && is_ident_byte(b[i]) {
-                    i += 1;
-                }
-                toks.push(Token {
-                    kind: Kind::Ident,
-                    start: name_start,
-                    end: i,
-                    depth,
-                });
-                continue;
-            }
-            b'\'' => {
-                i = char_end(text, i).unwrap_or(i + 1);
-                Kind::Other
-            }
-            b':' => {
-                i += 1;
-                Kind::Colon
-            }
-            b',' => {
-                i += 1;
-                Kind::Comma
-            }
-            b'(' | b'[' | b'{' => {
-                i += 1;
-                Kind::Open
-            }
-            b')' | b']' | b'}' => {
-                i += 1;
-                Kind::Close
-            }
-            _ if c.is_ascii_alphabetic() || c == b'_' => {
-                while i < len && is_ident_byte(b[i]) {
-                    i += 1;
-                }
-                Kind::Ident
-            }
-            _ if c.is_ascii_digit() => {
-                while i < len && (is_ident_byte(b[i]) || b[i] == b'.') {
-                    i += 1;
-                }
-                Kind::Other
-            }
-            _ => {
-                i += 1;
-                Kind::Other
-            }
-        };
-        let token_depth = match kind {
-            Kind::Open => {
-                depth += 1;
-                depth - 1
-            }
-            Kind::Close => {
-                depth = depth.saturating_sub(1);
-                depth
-            }
-            _ => depth,
-        };
-        toks.push(Token {
-            kind,
-            start,
-            end: i,
-            depth: token_depth,
-        });
-    }
-    toks
-}
-
-fn is_ident_byte(c: u8) -> bool {
-    c.is_ascii_alphanumeric() || c == b'_'
-}
-
-/// End of the `"..."` string whose opening quote is at `i` (the end of the text if
-/// unterminated).
-fn string_end(b: &[u8], i: usize) -> usize {
-    let mut j = i + 1;
-    while j < b.len() {
-        match b[j] {
-            b'\\' => j += 2,
-            b'"' => return j + 1,
-            _ => j += 1,
-        }
-    }
-    b.len()
-}
-
-/// End of the raw string `r#"..."#` (or `br#"..."#`) starting at `i`, if one does.
-fn raw_string_end(b: &[u8], i: usize) -> Option<usize> {
-    let mut j = i;
-    if b.get(j) == Some(&b'b') {
-        j += 1;
-    }
-    if b.get(j) != Some(&b'r') {
-        return None;
-    }
-    j += 1;
-    let hashes = b[j..].iter().take_while(|&&x| x == b'#').count();
-    j += hashes;
-    if b.get(j) != Some(&b'"') {
-        return None;
-    }
-    j += 1;
-    while j < b.len() {
-        if b[j] == b'"' && b[j + 1..].iter().take_while(|&&x| x == b'#').count() >= hashes {
-            return Some(j + 1 + hashes);
-        }
-        j += 1;
-    }
-    Some(b.len())
-}
-
-/// End of the `/* ... */` comment (comments nest) starting at `i`.
-fn block_comment_end(b: &[u8], i: usize) -> usize {
-    let (mut j, mut depth) = (i + 2, 1usize);
-    while j < b.len() {
-        if b[j] == b'/' && b.get(j + 1) == Some(&b'*') {
-            depth += 1;
-            j += 2;
-        } else if b[j] == b'*' && b.get(j + 1) == Some(&b'/') {
-            depth -= 1;
-            j += 2;
-            if depth == 0 {
-                return j;
-            }
-        } else {
-            j += 1;
-        }
-    }
-    b.len()
-}
-
-/// End of the character literal `'x'` or `'\..'` starting at `i`, if it is one.
-fn char_end(text: &str, i: usize) -> Option<usize> {
-    let rest = text.get(i + 1..)?;
-    let body = if rest.starts_with('\\') {
-        // An escape (the escaped character may be a quote): up to the next quote,
-        // within a few characters (`'\u{1F600}'`).
-        rest.get(2..)?.find('\'').filter(|&n| n <= 10)? + 2
-    } else {
-        rest.chars().next()?.len_utf8()
-    };
-    rest.get(body..)?
-        .starts_with('\'')
-        .then_some(i + 1 + body + 1)
 }
 
 #[cfg(test)]

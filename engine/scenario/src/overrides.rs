@@ -4,7 +4,8 @@
 //! positions meaningful and preserves the names of enum-like pipeline entries such as
 //! `Density(every: 5)`, which a generic RON value tree would drop.
 
-use crate::registry::snake_case;
+use crate::lexer::{lex, Shape, SyntaxError, Tok, Token};
+use sph_core::registry::snake_case;
 use std::ops::Range;
 use std::str::FromStr;
 
@@ -99,26 +100,7 @@ pub fn apply_overrides(source: &str, overrides: &[Override]) -> Result<String, O
     Ok(text)
 }
 
-/// Kind of bracketed group.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Shape {
-    /// `Name(...)` or `(...)`: a struct, tuple or enum variant.
-    Struct,
-    /// `[...]`
-    List,
-    /// `{...}`
-    Map,
-}
-
 impl Shape {
-    fn close(self) -> char {
-        match self {
-            Shape::Struct => ')',
-            Shape::List => ']',
-            Shape::Map => '}',
-        }
-    }
-
     /// What one entry is called in messages.
     fn item(self) -> &'static str {
         match self {
@@ -129,42 +111,7 @@ impl Shape {
     }
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Tok {
-    Open(Shape),
-    Close(Shape),
-    Comma,
-    Colon,
-    /// String or byte string, plain or raw.
-    Str,
-    /// Char or byte literal.
-    Char,
-    /// Identifier, number or any other run of non-delimiter characters.
-    Word,
-}
-
-#[derive(Debug, Clone, Copy)]
-struct Token {
-    tok: Tok,
-    start: usize,
-    end: usize,
-}
-
-/// A syntax error at a byte offset.
-#[derive(Debug)]
-struct SyntaxError {
-    at: usize,
-    reason: String,
-}
-
 impl SyntaxError {
-    fn new(at: usize, reason: impl Into<String>) -> Self {
-        Self {
-            at,
-            reason: reason.into(),
-        }
-    }
-
     /// Converts the byte offset into a 1-based line:column (columns count characters).
     fn locate(self, text: &str, raw: &str) -> OverrideError {
         let before = &text.as_bytes()[..self.at.min(text.len())];
@@ -182,135 +129,6 @@ impl SyntaxError {
                 + 1,
             reason: self.reason,
         }
-    }
-}
-
-/// Splits RON text into tokens, skipping whitespace and (nested) comments.
-fn lex(src: &str) -> Result<Vec<Token>, SyntaxError> {
-    let b = src.as_bytes();
-    let mut tokens = Vec::new();
-    let mut i = 0;
-    while let Some(&c) = b.get(i) {
-        let start = i;
-        let tok = match c {
-            _ if c.is_ascii_whitespace() => {
-                i += 1;
-                continue;
-            }
-            b'/' if b.get(i + 1) == Some(&b'/') => {
-                i = b[i..]
-                    .iter()
-                    .position(|&c| c == b'\n')
-                    .map_or(b.len(), |p| i + p);
-                continue;
-            }
-            b'/' if b.get(i + 1) == Some(&b'*') => {
-                i = block_comment_end(b, i)?;
-                continue;
-            }
-            b'(' | b'[' | b'{' | b')' | b']' | b'}' => {
-                i += 1;
-                let shape = match c {
-                    b'(' | b')' => Shape::Struct,
-                    b'[' | b']' => Shape::List,
-                    _ => Shape::Map,
-                };
-                if matches!(c, b'(' | b'[' | b'{') {
-                    Tok::Open(shape)
-                } else {
-                    Tok::Close(shape)
-                }
-            }
-            b',' => {
-                i += 1;
-                Tok::Comma
-            }
-            b':' => {
-                i += 1;
-                Tok::Colon
-            }
-            _ => match literal(b, i)? {
-                Some((tok, end)) => {
-                    i = end;
-                    tok
-                }
-                None => {
-                    i += 1;
-                    while i < b.len() && !is_delimiter(b, i) {
-                        i += 1;
-                    }
-                    Tok::Word
-                }
-            },
-        };
-        tokens.push(Token { tok, start, end: i });
-    }
-    Ok(tokens)
-}
-
-/// Whether the byte at `i` ends a word.
-fn is_delimiter(b: &[u8], i: usize) -> bool {
-    let c = b[i];
-    c.is_ascii_whitespace()
-        || b"()[]{},:\"'".contains(&c)
-        || (c == b'/' && matches!(b.get(i + 1), Some(b'/' | b'*')))
-}
-
-/// End offset of the (nested) block comment starting at `start`.
-fn block_comment_end(b: &[u8], start: usize) -> Result<usize, SyntaxError> {
-    let (mut depth, mut i) = (0usize, start);
-    while i < b.len() {
-        if b[i..].starts_with(b"/*") {
-            depth += 1;
-            i += 2;
-        } else if b[i..].starts_with(b"*/") {
-            depth -= 1;
-            i += 2;
-            if depth == 0 {
-                return Ok(i);
-            }
-        } else {
-            i += 1;
-        }
-    }
-    Err(SyntaxError::new(start, "unterminated block comment"))
-}
-
-/// Recognises a string, raw string or char literal (optionally `b`-prefixed) at `i`.
-fn literal(b: &[u8], i: usize) -> Result<Option<(Tok, usize)>, SyntaxError> {
-    let p = i + usize::from(b[i] == b'b');
-    match b.get(p) {
-        Some(&quote @ (b'"' | b'\'')) => {
-            // `'''` is the char `'` in RON, so a char's first character never closes it.
-            let mut j = p + 1 + usize::from(quote == b'\'' && b.get(p + 1) == Some(&b'\''));
-            while let Some(&c) = b.get(j) {
-                if c == quote {
-                    let tok = if quote == b'"' { Tok::Str } else { Tok::Char };
-                    return Ok(Some((tok, j + 1)));
-                }
-                j += if c == b'\\' { 2 } else { 1 };
-            }
-            let what = if quote == b'"' {
-                "string"
-            } else {
-                "char literal"
-            };
-            Err(SyntaxError::new(i, format!("unterminated {what}")))
-        }
-        Some(b'r') => {
-            let hashes = b[p + 1..].iter().take_while(|&&c| c == b'#').count();
-            let body = p + 2 + hashes;
-            if b.get(body - 1) != Some(&b'"') {
-                return Ok(None);
-            }
-            let mut close = vec![b'"'];
-            close.resize(hashes + 1, b'#');
-            match b[body..].windows(close.len()).position(|w| w == close) {
-                Some(k) => Ok(Some((Tok::Str, body + k + close.len()))),
-                None => Err(SyntaxError::new(i, "unterminated raw string")),
-            }
-        }
-        _ => Ok(None),
     }
 }
 
@@ -485,11 +303,11 @@ impl<'a> Parser<'a> {
             .is_some_and(|n| n.tok == Tok::Open(Shape::Struct));
         match t.tok {
             Tok::Open(_) => self.group(t.start, None, depth),
-            Tok::Word if named => {
+            _ if t.tok.is_word() && named => {
                 self.pos += 1;
                 self.group(t.start, Some(text), depth)
             }
-            Tok::Word | Tok::Str | Tok::Char => {
+            Tok::Ident | Tok::Word | Tok::Str | Tok::Char => {
                 self.pos += 1;
                 let unit = text.starts_with(|c: char| c.is_ascii_uppercase())
                     && text.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
@@ -562,7 +380,7 @@ impl<'a> Parser<'a> {
 
     /// Consumes `name:` if it comes next.
     fn field_name(&mut self) -> Option<&'a str> {
-        let t = self.peek(0).filter(|t| t.tok == Tok::Word)?;
+        let t = self.peek(0).filter(|t| t.tok.is_word())?;
         self.peek(1).filter(|c| c.tok == Tok::Colon)?;
         self.pos += 2;
         let name = self.text(t);
@@ -575,7 +393,7 @@ fn document(src: &str) -> Result<Node<'_>, SyntaxError> {
     let mut p = Parser::new(src)?;
     while p
         .peek(0)
-        .is_some_and(|t| t.tok == Tok::Word && p.text(t).starts_with('#'))
+        .is_some_and(|t| t.tok.is_word() && p.text(t).starts_with('#'))
     {
         p.pos += 1;
         if p.peek(0).map(|t| t.tok) != Some(Tok::Open(Shape::List)) {

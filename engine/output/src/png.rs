@@ -6,7 +6,7 @@ use glam::DVec2;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use super::plot::{format_number, render_png, tick_label_width, PlotError, FONT_FAMILY};
+use crate::plot::{format_number, render_png, tick_label_width, PlotError, FONT_FAMILY};
 
 /// What to draw in one snapshot.
 pub struct Snapshot<'a> {
@@ -210,7 +210,7 @@ pub fn write_snapshot(path: &Path, s: &Snapshot) -> Result<(), PlotError> {
 
 /// Vertical colour bar aligned with the plotting area, with 5 tick labels and a rotated label.
 fn draw_colour_bar(
-    area: &super::plot::Root<'_>,
+    area: &crate::plot::Root<'_>,
     layout: &Layout,
     (v0, v1): (f64, f64),
     label: &str,
@@ -272,7 +272,7 @@ fn colour_range(requested: (f64, f64), values: &[f64]) -> (f64, f64) {
     if a.is_finite() && b.is_finite() && b > a && (b - a).is_finite() {
         return (a, b);
     }
-    super::plot::axis_range(values.iter().copied(), 0.0)
+    crate::plot::axis_range(values.iter().copied(), 0.0)
 }
 
 /// Median nearest-neighbour distance of (a sample of) the finite positions, via a uniform grid.
@@ -349,7 +349,7 @@ fn typical_spacing(positions: &[DVec2]) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::output::plot::tests::{assert_png, test_dir};
+    use crate::plot::tests::{assert_png, test_dir};
     use std::fs;
 
     /// A dam-break-like block of particles on a 0.02 m lattice in a 4 x 2 m tank.

@@ -4,10 +4,10 @@
 //! incident and reflected waves. [`WaveTheory`] compares a piston flume's gauges with
 //! Biesel's wave height and the dispersion relation (`waves.md` after a run).
 
-use crate::piston::{biesel_height_over_stroke, wavenumber};
-use crate::scenario::Scenario;
 use crate::series::read_series;
 use crate::sweep::fit_harmonic;
+use sph_core::piston::{biesel_height_over_stroke, wavenumber};
+use sph_scenario::Scenario;
 use std::f64::consts::PI;
 use std::fmt::Write as _;
 use std::path::Path;
