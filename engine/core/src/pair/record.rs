@@ -204,13 +204,13 @@ impl Records {
         self.fields = fields;
         self.len = len;
         let lines = (len * self.stride).div_ceil(8);
-        // The buffer keeps its capacity from step to step. It grows to 1/64 more than
-        // needed (room for the ghost count's step-to-step changes), not by doubling, and
-        // to at least a line a record, so that a narrow pass first in the step (the
-        // filters' four fields) does not make the momentum pass reallocate it.
+        // The buffer keeps its capacity from step to step. It grows to exactly what is
+        // needed (a rare copy when the ghost count reaches a new high beats holding
+        // slack in the largest buffer of the step), and to at least a line a record, so
+        // that a narrow pass first in the step (the filters' four fields) does not make
+        // the momentum pass reallocate it.
         if lines > self.lines.capacity() {
-            let want = lines.max(len);
-            self.lines = Vec::with_capacity(want + want / 64);
+            self.lines = Vec::with_capacity(lines.max(len));
         }
         self.lines.resize(lines, Line::default());
     }
