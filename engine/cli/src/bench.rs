@@ -513,7 +513,7 @@ fn csv_table(fixed: &[Measurement], timed: &[Measurement]) -> String {
             let eff = efficiency(m, fixed).map_or(String::new(), |e| format!("{e:.3}"));
             let _ = write!(
                 out,
-                "{kind},{},{},{},{:.6},{:.3},{:.4e},{:.4e},{:.0},{:.1},{:.0},{:.0},{:.0},{eff}",
+                "{kind},{},{},{},{:.6},{:.3},{:.4e},{:.4e},{:.0},{:.1},{:.0},{:.1},{:.1},{eff}",
                 m.particles,
                 m.threads,
                 m.steps,
