@@ -37,7 +37,7 @@ pub fn register(registry: &mut StageRegistry) {
 
 pub struct ContinuityStage {
     terms: RateTerms,
-    unused: Vec<f64>,
+    unused: Vec<rates::Power>,
 }
 
 impl Stage for ContinuityStage {

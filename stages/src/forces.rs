@@ -12,7 +12,9 @@ use sph_core::components::{Acceleration, DensityRate, Fluid};
 use sph_core::contract::Access;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{require_neighbours, ArtificialViscosity, ViscousDissipation};
+use sph_core::vocab::{
+    require_neighbours, ArtificialViscosity, DiffusionPower, ViscousDissipation,
+};
 use sph_core::world::ensure_component;
 use sph_core::StageRegistry;
 
@@ -55,8 +57,8 @@ pub fn register(registry: &mut StageRegistry) {
 pub struct Forces {
     params: Params,
     terms: RateTerms,
-    /// The dissipation rate of each chunk of particles, kept between steps.
-    chunk_power: Vec<f64>,
+    /// The energy rates of each chunk of particles, kept between steps.
+    chunk_power: Vec<rates::Power>,
 }
 
 impl Stage for Forces {
@@ -79,11 +81,15 @@ impl Stage for Forces {
         let out = Outputs {
             acceleration: true,
             density_rate: self.terms.continuity.is_some(),
-            power: sim.resources.contains::<ViscousDissipation>(),
+            power: sim.resources.contains::<ViscousDissipation>()
+                || sim.resources.contains::<DiffusionPower>(),
         };
         let power = rates::run(sim, &self.terms, out, &mut self.chunk_power)?;
         if let Some(d) = sim.resources.get_mut::<ViscousDissipation>() {
-            d.power = power;
+            d.power = power.viscous;
+        }
+        if let Some(d) = sim.resources.get_mut::<DiffusionPower>() {
+            d.power = power.diffusion;
         }
         Ok(())
     }
@@ -104,7 +110,8 @@ impl Stage for Forces {
         let access = rates::declare_reads(Access::new(), reads)
             .writes::<Acceleration>()
             .writes_if::<DensityRate>(continuity)
-            .writes::<ViscousDissipation>();
+            .writes::<ViscousDissipation>()
+            .writes::<DiffusionPower>();
         match viscosity {
             Some(v) => access.exposes(v),
             None => access,

@@ -36,40 +36,63 @@ pub(crate) struct Outputs {
     pub acceleration: bool,
     /// d rho/dt into `DensityRate`.
     pub density_rate: bool,
-    /// The dissipation rate (1/2) sum_i m_i P_i, returned.
+    /// The energy rates ([`Power`]), returned.
     pub power: bool,
 }
 
-/// Sums `terms` for every fluid particle and writes `out`; returns the dissipation
-/// rate when asked (else 0). `chunk_power` keeps one partial sum per chunk of
-/// particles between steps; the chunks are added in order, so the total is the same
-/// for any thread count.
+/// The energy rates of a pass [W per metre of depth].
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Power {
+    /// The viscous dissipation rate (1/2) sum_i m_i P_i.
+    pub viscous: f64,
+    /// The rate at which density diffusion changes the internal energy,
+    /// sum_i m_i (p_i/rho_i^2) D_i.
+    pub diffusion: f64,
+}
+
+/// Sums `terms` for every fluid particle and writes `out`; returns the energy rates
+/// when asked (else 0). `chunk_power` keeps one partial sum per chunk of particles
+/// between steps; the chunks are added in order, so the totals are the same for any
+/// thread count.
 pub(crate) fn run(
     sim: &mut Sim,
     terms: &RateTerms,
     out: Outputs,
-    chunk_power: &mut Vec<f64>,
-) -> Result<f64, StepError> {
-    const fn bits(list: &[TermBit]) -> u8 {
+    chunk_power: &mut Vec<Power>,
+) -> Result<Power, StepError> {
+    const fn bits(list: &[TermBit]) -> u16 {
         let (mut set, mut k) = (0, 0);
         while k < list.len() {
-            set |= 1 << list[k] as u8;
+            set |= 1 << list[k] as u16;
             k += 1;
         }
         set
     }
     use TermBit::*;
     // The shipped scenarios' sets get loops compiled for them.
-    const SPLASH: u8 = bits(&[
+    const SPLASH: u16 = bits(&[
         PressureGradient,
         ArtificialViscosity,
         ArtificialPressure,
         Continuity,
     ]);
-    const WAVES: u8 = bits(&[PressureGradient, ArtificialViscosity, Continuity]);
-    const PLAIN: u8 = bits(&[PressureGradient, ArtificialViscosity]);
-    const DENSITY: u8 = bits(&[Continuity]);
+    const WAVES: u16 = bits(&[PressureGradient, ArtificialViscosity, Continuity]);
+    const PLAIN: u16 = bits(&[PressureGradient, ArtificialViscosity]);
+    const DENSITY: u16 = bits(&[Continuity]);
+    // With each density diffusion (one bit more).
+    const SPLASH_MC: u16 = SPLASH | bits(&[MolteniColagrossi]);
+    const SPLASH_F: u16 = SPLASH | bits(&[Fourtakas]);
+    const WAVES_MC: u16 = WAVES | bits(&[MolteniColagrossi]);
+    const WAVES_F: u16 = WAVES | bits(&[Fourtakas]);
     if let Some(set) = Fixed::<SPLASH>::of(terms) {
+        run_set(sim, set, out, chunk_power)
+    } else if let Some(set) = Fixed::<SPLASH_F>::of(terms) {
+        run_set(sim, set, out, chunk_power)
+    } else if let Some(set) = Fixed::<WAVES_F>::of(terms) {
+        run_set(sim, set, out, chunk_power)
+    } else if let Some(set) = Fixed::<SPLASH_MC>::of(terms) {
+        run_set(sim, set, out, chunk_power)
+    } else if let Some(set) = Fixed::<WAVES_MC>::of(terms) {
         run_set(sim, set, out, chunk_power)
     } else if let Some(set) = Fixed::<WAVES>::of(terms) {
         run_set(sim, set, out, chunk_power)
@@ -87,12 +110,12 @@ fn run_set<R: RateTerm + Copy>(
     sim: &mut Sim,
     terms: R,
     out: Outputs,
-    chunk_power: &mut Vec<f64>,
-) -> Result<f64, StepError> {
+    chunk_power: &mut Vec<Power>,
+) -> Result<Power, StepError> {
     let eom = EquationsOfMotion(terms);
     let power = with_records(sim, terms.reads(), |sim, particles, records| {
         let Some(nb) = sim.resources.get::<Neighbours>() else {
-            return Ok(0.0);
+            return Ok(Power::default());
         };
         let n = nb.n_fluid;
         let mut acc = match out.acceleration {
@@ -116,7 +139,7 @@ fn run_set<R: RateTerm + Copy>(
         let rate: &mut [DensityRate] = rate.as_deref_mut().unwrap_or(&mut []);
         let chunks = n.div_ceil(CHUNK);
         chunk_power.clear();
-        chunk_power.resize(if out.power { chunks } else { 0 }, 0.0);
+        chunk_power.resize(if out.power { chunks } else { 0 }, Power::default());
         let (c, g) = (&sim.constants, sim.constants.gravity);
         with_kernel!(c.kernel, c.h, |k| {
             let pass =
@@ -126,7 +149,7 @@ fn run_set<R: RateTerm + Copy>(
                 .zip(optional_pieces(&mut chunk_power[..], chunks, 1))
                 .enumerate()
                 .for_each(|(c, ((mut acc, mut rate), power))| {
-                    let mut sum = 0.0;
+                    let mut sum = Power::default();
                     for k in 0..(n - c * CHUNK).min(CHUNK) {
                         let i = c * CHUNK + k;
                         let s = pass.sum(i, nb.of(i));
@@ -136,7 +159,8 @@ fn run_set<R: RateTerm + Copy>(
                         if let Some(r) = rate.as_deref_mut() {
                             r[k].0 = s.drho;
                         }
-                        sum += s.power;
+                        sum.viscous += s.power;
+                        sum.diffusion += s.diffusion;
                     }
                     if let Some(p) = power {
                         p[0] = sum;
@@ -144,9 +168,12 @@ fn run_set<R: RateTerm + Copy>(
                 });
             Ok::<(), StepError>(())
         })?;
-        Ok(chunk_power.iter().sum())
+        Ok(chunk_power.iter().fold(Power::default(), |a, p| Power {
+            viscous: a.viscous + p.viscous,
+            diffusion: a.diffusion + p.diffusion,
+        }))
     })?;
-    Ok(power.unwrap_or(0.0))
+    Ok(power.unwrap_or_default())
 }
 
 /// Pieces of `per` elements of an optional output of `len` elements: the slice's own

@@ -10,6 +10,8 @@
 //!   damps the velocity.
 //! - [`ViscousDissipation`]: the artificial viscosity's dissipation rate, asked for by
 //!   `Energy` and filled in by `Forces`.
+//! - [`DiffusionPower`]: the internal-energy change rate of a density diffusion,
+//!   asked for by `Energy` and filled in by `Forces`.
 //! - [`ArtificialViscosity`]: the viscosity coefficients the momentum stage exposes
 //!   (for a sweep's linear-theory damping).
 //! - [`ContinuityInPipeline`]: marks that a continuity stage writes the density rate.
@@ -234,6 +236,16 @@ crate::checkpoint_newtype!(HalfVelocity(DVec2), HalfDensity(f64));
 #[derive(Debug, Default, Clone, Copy)]
 pub struct ViscousDissipation {
     /// Rate of dissipation this step [W per metre of depth].
+    pub power: f64,
+}
+
+/// The rate at which a density-diffusion term changes the internal energy,
+/// sum_i m_i (p_i/rho_i^2) D_i, each step when a stage that reports energy has asked
+/// for it (by inserting it); filled in by the momentum stage whose terms include a
+/// density diffusion (docs/physics.md, "Density diffusion").
+#[derive(Debug, Default, Clone, Copy)]
+pub struct DiffusionPower {
+    /// Rate of internal-energy change this step [W per metre of depth].
     pub power: f64,
 }
 

@@ -11,8 +11,11 @@
 pub mod artificial_pressure;
 pub mod artificial_viscosity;
 pub mod continuity;
+pub mod diffusion;
+pub mod fourtakas;
 pub mod laminar_viscosity;
 pub mod mls;
+pub mod molteni_colagrossi;
 pub mod pressure_gradient;
 pub mod shepard;
 
@@ -26,6 +29,9 @@ pub trait Term: RateTerm + Sized {
     /// The fields of i and j the term reads (its `RateTerm::reads`), known before the
     /// run's constants are, for the stage's declared contract.
     const READS: Fields;
+    /// Whether the term is a density diffusion (it adds to the continuity equation, so
+    /// it needs `Continuity()` in the same list, and a list takes one at most).
+    const DIFFUSION: bool = false;
     /// The parameters a scenario gives it, with documented defaults.
     type Params: Clone + std::fmt::Debug + Default + Serialize + DeserializeOwned;
     /// Refuses out-of-range parameters with a message naming the field and what is
@@ -83,7 +89,7 @@ macro_rules! rate_terms {
 
         /// Each term's bit in a [`RateTerms::set`].
         #[derive(Clone, Copy)]
-        #[repr(u8)]
+        #[repr(u16)]
         pub enum TermBit {
             $($ty,)*
         }
@@ -93,11 +99,11 @@ macro_rules! rate_terms {
         /// for it: no test per term and pair, no code for the absent terms (whose
         /// slots hold unused defaults).
         #[derive(Clone, Copy, Default)]
-        pub struct Fixed<const SET: u8> {
+        pub struct Fixed<const SET: u16> {
             $($module: $module::$ty,)*
         }
 
-        impl<const SET: u8> Fixed<SET> {
+        impl<const SET: u16> Fixed<SET> {
             /// The terms of `terms`, whose set must be `SET` (else None).
             pub fn of(terms: &RateTerms) -> Option<Self> {
                 (terms.set() == SET).then(|| Self {
@@ -106,19 +112,19 @@ macro_rules! rate_terms {
             }
         }
 
-        impl<const SET: u8> RateTerm for Fixed<SET> {
+        impl<const SET: u16> RateTerm for Fixed<SET> {
             const USES_COEF: bool =
-                false $(|| (SET & (1 << TermBit::$ty as u8) != 0 && <$module::$ty as RateTerm>::USES_COEF))*;
+                false $(|| (SET & (1 << TermBit::$ty as u16) != 0 && <$module::$ty as RateTerm>::USES_COEF))*;
             fn reads(&self) -> Fields {
                 let mut f = Fields::default();
-                $(if SET & (1 << TermBit::$ty as u8) != 0 {
+                $(if SET & (1 << TermBit::$ty as u16) != 0 {
                     f = f.with(<$module::$ty as Term>::READS);
                 })*
                 f
             }
             #[inline(always)]
             fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
-                $(if SET & (1 << TermBit::$ty as u8) != 0 {
+                $(if SET & (1 << TermBit::$ty as u16) != 0 {
                     self.$module.pair(me, p, r);
                 })*
             }
@@ -139,12 +145,31 @@ macro_rules! rate_terms {
                     };
                     checked.map_err(|e| format!("term {}: {e}", spec.name()))?;
                 }
+                let diffusions: Vec<&str> = specs
+                    .iter()
+                    .filter(|s| match s {
+                        $(TermSpec::$ty(_) => <$module::$ty as Term>::DIFFUSION,)*
+                    })
+                    .map(|s| s.name())
+                    .collect();
+                if diffusions.len() > 1 {
+                    return Err(format!(
+                        "field `terms`: {} are all density diffusions; name one at most",
+                        diffusions.join(", ")
+                    ));
+                }
+                let continuity = specs.iter().any(|s| matches!(s, TermSpec::Continuity(_)));
+                if let (Some(d), false) = (diffusions.first(), continuity) {
+                    return Err(format!(
+                        "field `terms`: {d} adds to the continuity equation's d rho/dt; name Continuity() in the same list"
+                    ));
+                }
                 Ok(())
             }
 
             /// The terms present, bit k for the k-th term of the list ([`TermBit`]).
-            pub fn set(&self) -> u8 {
-                0 $(| if self.$module.is_some() { 1 << TermBit::$ty as u8 } else { 0 })*
+            pub fn set(&self) -> u16 {
+                0 $(| if self.$module.is_some() { 1 << TermBit::$ty as u16 } else { 0 })*
             }
 
             /// The terms of a checked list for a run with constants `c`.
@@ -181,4 +206,9 @@ rate_terms! {
     artificial_pressure::ArtificialPressure,
     laminar_viscosity::LaminarViscosity,
     continuity::Continuity,
+    molteni_colagrossi::MolteniColagrossi,
+    fourtakas::Fourtakas,
 }
+
+#[cfg(test)]
+mod tests;

@@ -21,6 +21,9 @@ pub struct Rates<L> {
     /// The viscous dissipation rate of particle i's pairs, P_i, such that the flow
     /// loses (1/2) sum_i m_i P_i [W per metre of depth].
     pub power: L,
+    /// A density-diffusion term's share D_i of d rho_i/dt [kg/m^3/s], kept apart from
+    /// `drho` for the energy budget (it is added to d rho_i/dt at the end).
+    pub diffusion: L,
 }
 
 /// A term of the equations of motion, written over the lane type.
@@ -44,6 +47,10 @@ pub struct RateSums {
     /// Particle i's share of the dissipation rate, (1/2) m_i P_i (see
     /// [`Rates::power`]) [W per metre of depth].
     pub power: f64,
+    /// The rate at which density diffusion changes particle i's internal energy,
+    /// m_i (p_i/rho_i^2) D_i (see [`Rates::diffusion`]; 0 unless the terms read
+    /// `PRho2`, as the diffusion terms do) [W per metre of depth].
+    pub diffusion: f64,
 }
 
 /// The pair term that sums a set of rate terms in one neighbour loop.
@@ -67,6 +74,7 @@ impl<R: RateTerm + Clone> PairTerm for EquationsOfMotion<R> {
             ay: z,
             drho: z,
             power: z,
+            diffusion: z,
         }
     }
 
@@ -83,10 +91,12 @@ impl<R: RateTerm + Clone> PairTerm for EquationsOfMotion<R> {
 
     #[inline(always)]
     fn finish<L: Lane>(&self, me: &Me, r: Rates<L>) -> RateSums {
+        let diffusion = r.diffusion.sum();
         RateSums {
             acc: DVec2::new(r.ax.sum(), r.ay.sum()),
-            drho: r.drho.sum(),
+            drho: r.drho.sum() + diffusion,
             power: 0.5 * me.get(Field::Mass) * r.power.sum(),
+            diffusion: me.get(Field::Mass) * me.get(Field::PRho2) * diffusion,
         }
     }
 }

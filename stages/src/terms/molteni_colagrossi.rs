@@ -1,0 +1,42 @@
+//! Density diffusion of Molteni & Colagrossi (2009) (docs/physics.md, "Density
+//! diffusion"): psi_ij = 2 (rho_j - rho_i) x_ji / r_ij^2 in
+//!   D_i = delta h c_0 sum_j psi_ij . grad_i W_ij V_j.
+//! The simplest scheme; it also diffuses the hydrostatic density gradient, which near
+//! a wall or at the free surface drives a slow spurious flow (what the other two
+//! schemes correct).
+
+use super::diffusion::{Params, Scale};
+use super::Term;
+use sph_core::pair::{Field, Fields, Lane, Me, Pair, RateTerm, Rates};
+use sph_core::sim::Constants;
+
+/// `MolteniColagrossi(delta: 0.1)`.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct MolteniColagrossi {
+    scale: Scale,
+}
+
+impl Term for MolteniColagrossi {
+    const READS: Fields = Fields::of(&[Field::Rho, Field::PRho2]);
+    const DIFFUSION: bool = true;
+    type Params = Params;
+    fn check(p: &Params) -> Result<(), String> {
+        p.check()
+    }
+    fn build(p: &Params, c: &Constants) -> Self {
+        Self {
+            scale: Scale::new(p, c),
+        }
+    }
+}
+
+impl RateTerm for MolteniColagrossi {
+    fn reads(&self) -> Fields {
+        <Self as Term>::READS
+    }
+    #[inline(always)]
+    fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
+        let d = p.j(Field::Rho) - me.lanes::<L>(Field::Rho);
+        r.diffusion = r.diffusion + self.scale.flux(p, d);
+    }
+}
