@@ -9,6 +9,7 @@
 
 pub mod continuity;
 pub mod damping_zone;
+pub mod density_gradient;
 pub mod energy;
 pub mod eos;
 pub mod forces;
@@ -31,6 +32,7 @@ pub fn register_standard(registry: &mut StageRegistry) {
     ghost_walls::register(registry);
     neighbour_grid::register(registry);
     reinitialise::register(registry);
+    density_gradient::register(registry);
     eos::register(registry);
     continuity::register(registry);
     forces::register(registry);

@@ -11,7 +11,7 @@ use sph_core::contract::Access;
 use sph_core::pair::{with_records, EquationsOfMotion, Field, Fields, Pass, RateTerm};
 use sph_core::sim::Sim;
 use sph_core::stage::StepError;
-use sph_core::vocab::Neighbours;
+use sph_core::vocab::{DensityGradients, Neighbours};
 use sph_core::with_kernel;
 
 /// Declares in `access` the particle columns that records of `fields` are packed from.
@@ -24,6 +24,7 @@ pub(crate) fn declare_reads(access: Access, fields: Fields) -> Access {
         .reads_if::<Velocity>(has(&[Field::Vx, Field::Vy]))
         .reads_if::<Density>(has(&[Field::Rho, Field::Sound, Field::PRho2]))
         .reads_if::<Pressure>(has(&[Field::PRho2]))
+        .reads_if::<DensityGradients>(has(&[Field::GradRhoX, Field::GradRhoY]))
 }
 
 /// Fluid particles per parallel chunk.
@@ -84,6 +85,8 @@ pub(crate) fn run(
     const SPLASH_F: u16 = SPLASH | bits(&[Fourtakas]);
     const WAVES_MC: u16 = WAVES | bits(&[MolteniColagrossi]);
     const WAVES_F: u16 = WAVES | bits(&[Fourtakas]);
+    const SPLASH_D: u16 = SPLASH | bits(&[DeltaSph]);
+    const WAVES_D: u16 = WAVES | bits(&[DeltaSph]);
     if let Some(set) = Fixed::<SPLASH>::of(terms) {
         run_set(sim, set, out, chunk_power)
     } else if let Some(set) = Fixed::<SPLASH_F>::of(terms) {
@@ -93,6 +96,10 @@ pub(crate) fn run(
     } else if let Some(set) = Fixed::<SPLASH_MC>::of(terms) {
         run_set(sim, set, out, chunk_power)
     } else if let Some(set) = Fixed::<WAVES_MC>::of(terms) {
+        run_set(sim, set, out, chunk_power)
+    } else if let Some(set) = Fixed::<SPLASH_D>::of(terms) {
+        run_set(sim, set, out, chunk_power)
+    } else if let Some(set) = Fixed::<WAVES_D>::of(terms) {
         run_set(sim, set, out, chunk_power)
     } else if let Some(set) = Fixed::<WAVES>::of(terms) {
         run_set(sim, set, out, chunk_power)

@@ -10,6 +10,8 @@
 //!   damps the velocity.
 //! - [`ViscousDissipation`]: the artificial viscosity's dissipation rate, asked for by
 //!   `Energy` and filled in by `Forces`.
+//! - [`DensityGradients`]: the renormalised density gradients of fluid and ghosts,
+//!   written by `DensityGradient`, read by the delta-SPH term.
 //! - [`DiffusionPower`]: the internal-energy change rate of a density diffusion,
 //!   asked for by `Energy` and filled in by `Forces`.
 //! - [`ArtificialViscosity`]: the viscosity coefficients the momentum stage exposes
@@ -238,6 +240,12 @@ pub struct ViscousDissipation {
     /// Rate of dissipation this step [W per metre of depth].
     pub power: f64,
 }
+
+/// The renormalised density gradient of every particle, fluid then ghosts (the joint
+/// numbering of the neighbour lists), written each step by the `DensityGradient`
+/// stage for the delta-SPH diffusion term (docs/physics.md, "Density diffusion").
+#[derive(Debug, Default, Clone)]
+pub struct DensityGradients(pub Vec<glam::DVec2>);
 
 /// The rate at which a density-diffusion term changes the internal energy,
 /// sum_i m_i (p_i/rho_i^2) D_i, each step when a stage that reports energy has asked

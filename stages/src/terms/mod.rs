@@ -11,6 +11,7 @@
 pub mod artificial_pressure;
 pub mod artificial_viscosity;
 pub mod continuity;
+pub mod delta_sph;
 pub mod diffusion;
 pub mod fourtakas;
 pub mod laminar_viscosity;
@@ -208,6 +209,7 @@ rate_terms! {
     continuity::Continuity,
     molteni_colagrossi::MolteniColagrossi,
     fourtakas::Fourtakas,
+    delta_sph::DeltaSph,
 }
 
 #[cfg(test)]

@@ -237,8 +237,10 @@ impl<'a, T: PairTerm, K: Kernel> Pass<'a, T, K> {
     /// If `i` or a neighbour index is beyond the records.
     #[inline]
     pub fn sum(&self, i: usize, neighbours: &[u32]) -> T::Out {
-        /// The shipped momentum pass's fields (every field).
-        const ALL: u16 = Fields::of(&Field::ALL).bits();
+        /// The shipped momentum pass's fields.
+        const ALL: u16 = Fields::of(&Field::MOMENTUM).bits();
+        /// The same with the density gradient (delta-SPH).
+        const GRAD: u16 = Fields::of(&Field::ALL).bits();
         /// The Shepard and MLS filters' (x, y, rho, m).
         const FILTER: u16 = Fields::GEOMETRY.with(Fields::of(&[Field::Rho])).bits();
         // The common field sets get a loop compiled for them (known offsets, no test
@@ -247,6 +249,7 @@ impl<'a, T: PairTerm, K: Kernel> Pass<'a, T, K> {
             ($f:ident) => {
                 match self.records.fields().bits() {
                     ALL => $f::<T, K, ALL>(self, i, neighbours),
+                    GRAD => $f::<T, K, GRAD>(self, i, neighbours),
                     FILTER => $f::<T, K, FILTER>(self, i, neighbours),
                     _ => $f::<T, K, 0>(self, i, neighbours),
                 }
@@ -355,9 +358,13 @@ pub fn with_records<R>(
     f: impl FnOnce(&crate::Sim, &crate::world::Particles, &Records) -> Result<R, crate::StepError>,
 ) -> Result<Option<R>, crate::StepError> {
     let mut records = sim.resources.take::<Records>().unwrap_or_default();
+    let gradients = sim
+        .resources
+        .get::<crate::vocab::DensityGradients>()
+        .map(|g| &g.0[..]);
     let result = match crate::world::Particles::of(&sim.world) {
         Some(particles) => records
-            .pack(&particles, fields, &sim.constants.eos)
+            .pack_with(&particles, fields, &sim.constants.eos, gradients)
             .and_then(|()| f(sim, &particles, &records))
             .map(Some),
         None => Ok(None),

@@ -35,13 +35,31 @@ pub enum Field {
     PRho2,
     /// Sound speed c(rho) of the equation of state [m/s].
     Sound,
+    /// The renormalised density gradient, x [kg/m^4] (from
+    /// [`crate::vocab::DensityGradients`]).
+    GradRhoX,
+    /// The same, y.
+    GradRhoY,
 }
 
 impl Field {
     /// How many fields there are.
-    pub const COUNT: usize = 8;
+    pub const COUNT: usize = 10;
     /// Every field, in record order.
     pub const ALL: [Field; Field::COUNT] = [
+        Field::X,
+        Field::Y,
+        Field::Vx,
+        Field::Vy,
+        Field::Rho,
+        Field::Mass,
+        Field::PRho2,
+        Field::Sound,
+        Field::GradRhoX,
+        Field::GradRhoY,
+    ];
+    /// What the momentum equation's terms read: one 64-byte record.
+    pub const MOMENTUM: [Field; 8] = [
         Field::X,
         Field::Y,
         Field::Vx,
@@ -227,6 +245,22 @@ impl Records {
         fields: Fields,
         eos: &Tait,
     ) -> Result<(), StepError> {
+        self.pack_with(particles, fields, eos, None)
+    }
+
+    /// [`Records::pack`], with the density gradients of every particle in the joint
+    /// numbering (needed when `fields` holds `GradRhoX` or `GradRhoY`).
+    ///
+    /// # Errors
+    /// As [`Records::pack`]; the gradients are wanted but missing or not one per
+    /// particle.
+    pub fn pack_with(
+        &mut self,
+        particles: &Particles,
+        fields: Fields,
+        eos: &Tait,
+        gradients: Option<&[glam::DVec2]>,
+    ) -> Result<(), StepError> {
         let (x, rho, m) = (
             particles.joined::<Position>()?,
             particles.joined::<Density>()?,
@@ -244,6 +278,23 @@ impl Records {
         };
         let (v, p) = (v.as_ref().map(|c| c.view()), p.as_ref().map(|c| c.view()));
         let len = x.len();
+        let grad = match wants(&[Field::GradRhoX, Field::GradRhoY]) {
+            false => None,
+            true => match gradients {
+                Some(g) if g.len() == len => Some(g),
+                Some(g) => {
+                    return Err(StepError::Internal(format!(
+                        "{} density gradients for {len} particles: the DensityGradient stage must run after GhostWalls and NeighbourGrid and before the stage whose terms read it",
+                        g.len()
+                    )))
+                }
+                None => {
+                    return Err(StepError::Internal(
+                        "a pair term reads the density gradient, but no DensityGradient stage computed it".into(),
+                    ))
+                }
+            },
+        };
         if len.saturating_mul(16) >= i32::MAX as usize {
             return Err(StepError::Internal(format!(
                 "{len} particles are too many for the packed records' 32-bit offsets"
@@ -277,6 +328,10 @@ impl Records {
                 }
                 if held.contains(Field::Sound) {
                     put(Field::Sound, eos.sound_speed(rhoj));
+                }
+                if let Some(g) = grad {
+                    put(Field::GradRhoX, g[j as usize].x);
+                    put(Field::GradRhoY, g[j as usize].y);
                 }
             });
         Ok(())

@@ -1,0 +1,155 @@
+//! The renormalised density gradient of Randles & Libersky (1996), which the
+//! delta-SPH diffusion term reads (Antuono et al. 2010; docs/physics.md, "Density
+//! diffusion"):
+//!   <grad rho>_i = L_i sum_j (rho_j - rho_i) grad_i W_ij V_j,
+//!   L_i = [sum_j x_ji (x) grad_i W_ij V_j]^-1,   V_j = m_j / rho_j,
+//! exact for a linear density field wherever L_i exists (also at a free surface,
+//! where the plain sum is cut off). A particle whose matrix is near singular (a lone
+//! drop: det < 1e-3, against 1 inside the fluid) keeps the plain sum; such
+//! particle-steps are counted in the run's `gradient_unrenormalised` diagnostic.
+//!
+//! A ghost takes its source particle's gradient unchanged: with the hydrostatic
+//! ghost density (`GhostWalls(hydrostatic: true)`) the density field continues across
+//! the wall, and so does its gradient. Place the stage after `NeighbourGrid` and
+//! before the stage whose terms include `DeltaSph()`.
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use sph_core::components::{Density, Ghost, Mass, Position};
+use sph_core::contract::Access;
+use sph_core::pair::{with_records, Field, Fields, Lane, Me, Pair, PairTerm, Pass};
+use sph_core::sim::Sim;
+use sph_core::stage::{SetupError, Stage, StepError};
+use sph_core::vocab::{require_neighbours, DensityGradients, Neighbours};
+use sph_core::world::{archetype, column};
+use sph_core::{with_kernel, StageRegistry};
+
+/// `DensityGradient()`: no parameters.
+#[derive(Debug, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Params {}
+
+pub fn register(registry: &mut StageRegistry) {
+    registry.register(
+        "density_gradient",
+        "renormalised density gradient of fluid and ghosts (for DeltaSph())",
+        |_: Params| Ok(DensityGradient),
+    );
+}
+
+pub struct DensityGradient;
+
+/// The sums of one particle: the matrix sum_j x_ji (x) grad W V_j (symmetric: grad W
+/// lies along x_ji) and sum_j (rho_j - rho_i) grad W V_j.
+#[derive(Clone)]
+pub struct Renormalised;
+
+/// Below this determinant of the matrix, its inverse is not used.
+const SINGULAR: f64 = 1e-3;
+
+impl PairTerm for Renormalised {
+    type Acc<L: Lane> = [L; 5];
+    /// The gradient, and whether the matrix was singular.
+    type Out = (glam::DVec2, bool);
+    fn reads(&self) -> Fields {
+        Fields::of(&[Field::Rho])
+    }
+    #[inline(always)]
+    fn zero<L: Lane>(&self) -> [L; 5] {
+        [L::zero(); 5]
+    }
+    #[inline(always)]
+    fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, acc: &mut [L; 5]) {
+        let v = p.j(Field::Mass) / p.j(Field::Rho);
+        let (vx, vy) = (v * p.gx, v * p.gy);
+        // x_ji = -(dx, dy).
+        acc[0] = acc[0] - p.dx * vx;
+        acc[1] = acc[1] - p.dx * vy;
+        acc[2] = acc[2] - p.dy * vy;
+        let d = p.j(Field::Rho) - me.lanes::<L>(Field::Rho);
+        acc[3] = acc[3] + d * vx;
+        acc[4] = acc[4] + d * vy;
+    }
+    fn finish<L: Lane>(&self, _: &Me, acc: [L; 5]) -> (glam::DVec2, bool) {
+        let [a, b, c, gx, gy] = acc.map(L::sum);
+        let det = a * c - b * b;
+        if det.abs() < SINGULAR || !det.is_finite() {
+            return (glam::DVec2::new(gx, gy), true);
+        }
+        (
+            glam::DVec2::new(c * gx - b * gy, a * gy - b * gx) / det,
+            false,
+        )
+    }
+}
+
+impl Stage for DensityGradient {
+    fn name(&self) -> &'static str {
+        "density_gradient"
+    }
+
+    fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
+        require_neighbours(sim, "density_gradient")
+    }
+
+    fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
+        let _span = tracing::trace_span!("pair_sums").entered();
+        let mut out = sim.resources.take::<DensityGradients>().unwrap_or_default();
+        let singular = with_records(sim, Renormalised.reads(), |sim, _, records| {
+            let Some(nb) = sim.resources.get::<Neighbours>() else {
+                return Ok(0);
+            };
+            let n = nb.n_fluid;
+            out.0.clear();
+            out.0.resize(records.len(), glam::DVec2::ZERO);
+            let c = &sim.constants;
+            let singular = with_kernel!(c.kernel, c.h, |k| {
+                let pass = Pass::new(&Renormalised, k, records)
+                    .map_err(|e| StepError::Internal(e.to_string()))?;
+                Ok::<usize, StepError>(
+                    out.0[..n]
+                        .par_iter_mut()
+                        .enumerate()
+                        .map(|(i, g)| {
+                            let (grad, singular) = pass.sum(i, nb.of(i));
+                            *g = grad;
+                            singular as usize
+                        })
+                        .sum(),
+                )
+            })?;
+            if let Some(ghosts) = archetype::<Ghost>(&sim.world) {
+                let sources = column::<Ghost>(ghosts)?;
+                let (fluid, ghost) = out.0.split_at_mut(n);
+                if ghost.len() != sources.len() {
+                    return Err(StepError::Internal(format!(
+                        "{} records beyond the fluid's {n} for {} ghosts",
+                        ghost.len(),
+                        sources.len()
+                    )));
+                }
+                for (g, s) in ghost.iter_mut().zip(sources.iter()) {
+                    *g = fluid.get(s.source as usize).copied().unwrap_or_default();
+                }
+            }
+            Ok(singular)
+        })?;
+        if let Some(singular @ 1..) = singular {
+            *sim.diagnostics
+                .entry("gradient_unrenormalised".into())
+                .or_insert(0.0) += singular as f64;
+        }
+        sim.resources.insert(out);
+        Ok(())
+    }
+
+    fn access(&self) -> Access {
+        Access::new()
+            .reads::<Neighbours>()
+            .reads::<Position>()
+            .reads::<Mass>()
+            .reads::<Density>()
+            .uses::<Ghost>()
+            .writes::<DensityGradients>()
+    }
+}

@@ -1,0 +1,47 @@
+//! The delta-SPH density diffusion of Antuono et al. (2010, 2012) (docs/physics.md,
+//! "Density diffusion"): Molteni & Colagrossi's flux less its first-order part,
+//!   psi_ij = 2 (rho_j - rho_i) x_ji / r_ij^2 - (<grad rho>_i + <grad rho>_j),
+//! with the renormalised gradients of the `DensityGradient` stage. The correction
+//! makes the term vanish on any linear density field (the hydrostatic one included),
+//! also where the kernel is cut off, so it is consistent at the free surface.
+
+use super::diffusion::{Params, Scale};
+use super::Term;
+use sph_core::pair::{Field, Fields, Lane, Me, Pair, RateTerm, Rates};
+use sph_core::sim::Constants;
+
+/// `DeltaSph(delta: 0.1)`; needs `DensityGradient()` earlier in the pipeline.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct DeltaSph {
+    scale: Scale,
+}
+
+impl Term for DeltaSph {
+    const READS: Fields = Fields::of(&[Field::Rho, Field::PRho2, Field::GradRhoX, Field::GradRhoY]);
+    const DIFFUSION: bool = true;
+    type Params = Params;
+    fn check(p: &Params) -> Result<(), String> {
+        p.check()
+    }
+    fn build(p: &Params, c: &Constants) -> Self {
+        Self {
+            scale: Scale::new(p, c),
+        }
+    }
+}
+
+impl RateTerm for DeltaSph {
+    fn reads(&self) -> Fields {
+        <Self as Term>::READS
+    }
+    #[inline(always)]
+    fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
+        // (rho_j - rho_i) - (1/2)(G_i + G_j) . x_ji, with x_ji = -(dx, dy): the flux of
+        // 2 d x_ji / r^2 . grad W is then psi_ij . grad W.
+        let half = L::splat(0.5);
+        let gx = me.lanes::<L>(Field::GradRhoX) + p.j(Field::GradRhoX);
+        let gy = me.lanes::<L>(Field::GradRhoY) + p.j(Field::GradRhoY);
+        let d = p.j(Field::Rho) - me.lanes::<L>(Field::Rho) + half * (gx * p.dx + gy * p.dy);
+        r.diffusion = r.diffusion + self.scale.flux(p, d);
+    }
+}
