@@ -23,6 +23,7 @@ pub mod scan;
 pub mod snapshots;
 pub mod sort_particles;
 pub mod terms;
+pub mod transducer;
 pub mod vtk_frames;
 
 use sph_core::StageRegistry;

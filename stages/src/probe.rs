@@ -26,6 +26,7 @@
 //! on the walls without needing a wall integration; at rest it is the moment of the
 //! liquid's weight.
 
+use crate::transducer::{face_offsets, BoxFilter};
 use glam::DVec2;
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
@@ -131,6 +132,7 @@ pub fn register(registry: &mut StageRegistry) {
                 moving: false,
                 piston: None,
                 next: 0.0,
+                filters: Vec::new(),
                 out: None,
             })
         },
@@ -146,6 +148,9 @@ pub struct Probe {
     /// The piston's wall entity (found by its `Piston` component).
     piston: Option<hecs::Entity>,
     next: f64,
+    /// The time filters of the sensors that have one, a filter per method, in sensor
+    /// then method order.
+    filters: Vec<BoxFilter>,
     out: Option<SeriesWriter>,
 }
 
@@ -157,6 +162,12 @@ impl Stage for Probe {
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         let err = |m: String| SetupError::new("probe", m);
         self.sensors = sph_core::world::cloned::<PressureSensor>(&sim.world);
+        self.filters = self
+            .sensors
+            .iter()
+            .filter(|s| s.filter > 0.0)
+            .flat_map(|s| self.params.methods.iter().map(|_| BoxFilter::new(s.filter)))
+            .collect();
         self.gauges = sph_core::world::cloned::<WaveGauge>(&sim.world);
         self.moving = kinematics::moving(&sim.world);
         self.piston = sim
@@ -218,16 +229,47 @@ impl Stage for Probe {
         }
         let mut e = Enc::default();
         e.f64(self.next);
+        e.u64(self.filters.len() as u64);
+        for f in &self.filters {
+            let readings: Vec<(f64, f64, f64)> = f.readings().collect();
+            e.u64(readings.len() as u64);
+            for (t, w, r) in readings {
+                e.f64(t);
+                e.f64(w);
+                e.f64(r);
+            }
+        }
         Ok(e.into_bytes())
     }
 
     fn load_state(&mut self, _sim: &mut Sim, state: &[u8]) -> Result<(), sph_core::StateError> {
         let mut d = Dec::new(state);
         self.next = d.f64()?;
+        let n = d.len(8)?;
+        if n != self.filters.len() {
+            return Err(sph_core::StateError::Mismatch(format!(
+                "the checkpoint holds {n} sensor filters, the scenario {}",
+                self.filters.len()
+            )));
+        }
+        for f in &mut self.filters {
+            let k = d.len(24)?;
+            let mut readings = Vec::with_capacity(k);
+            for _ in 0..k {
+                readings.push((d.f64()?, d.f64()?, d.f64()?));
+            }
+            f.restore(readings);
+        }
         d.end()
     }
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
+        if !self.filters.is_empty() {
+            let readings = self.filtered_readings(sim)?;
+            for (f, r) in self.filters.iter_mut().zip(readings) {
+                f.push(sim.clock.time, r);
+            }
+        }
         if sim.clock.time + 1e-12 < self.next {
             return Ok(());
         }
@@ -373,12 +415,12 @@ impl Probe {
     fn columns(&self) -> Vec<String> {
         let mut c = Vec::new();
         for s in &self.sensors {
-            c.extend(
-                self.params
-                    .methods
-                    .iter()
-                    .map(|m| format!("{}.{}", s.name, m.suffix())),
-            );
+            for m in &self.params.methods {
+                c.push(format!("{}.{}", s.name, m.suffix()));
+                if s.transducer() {
+                    c.push(format!("{}.{}.transducer", s.name, m.suffix()));
+                }
+            }
         }
         c.extend(self.gauges.iter().map(|g| g.name.clone()));
         let flags = [
@@ -410,7 +452,6 @@ impl Probe {
             return Ok(vec![0.0; self.columns().len()]);
         };
         let x = particles.fluid::<Position>()?;
-        let p = particles.fluid::<Pressure>()?;
         let ds = sim.constants.spacing;
         // The scene as the world holds it now: the tank's pose (at rest at the origin
         // without a tank), the sensors' walls.
@@ -422,19 +463,15 @@ impl Probe {
                 .map_err(|_| StepError::Internal("a probed wall is not in the world".into()))
         };
         let mut row = Vec::new();
+        let mut filters = self.filters.iter();
         for s in &self.sensors {
-            let wall = &wall_now(s.wall)?;
-            let at = wall.point(s.along);
-            let carry = Carry {
-                rho0: sim.constants.eos.rho0,
-                g: sim.constants.gravity - wall.body.acceleration_at(at),
-            };
-            for m in &self.params.methods {
-                row.push(match m {
-                    Method::Shepard => self.shepard(sim, particles, at)?,
-                    Method::Nearest => nearest(sim, &x, &p, at, carry),
-                    Method::Averaged => averaged(sim, &x, &p, wall, s, carry),
-                });
+            for &m in &self.params.methods {
+                row.push(self.reading(sim, particles, s, m, 0.0)?);
+                if s.filter > 0.0 {
+                    row.push(filters.next().map_or(0.0, BoxFilter::mean));
+                } else if s.transducer() {
+                    row.push(self.face(sim, particles, s, m)?);
+                }
             }
         }
         for g in &self.gauges {
@@ -506,6 +543,71 @@ impl Probe {
             row.push(force * -wall.normal().x);
         }
         Ok(row)
+    }
+
+    /// Sensor `s`'s pressure by method `m` at `offset` along the wall from its centre.
+    fn reading(
+        &self,
+        sim: &Sim,
+        particles: Particles,
+        s: &PressureSensor,
+        m: Method,
+        offset: f64,
+    ) -> Result<f64, StepError> {
+        let wall = &*sim
+            .world
+            .get::<&WallPose>(s.wall)
+            .map_err(|_| StepError::Internal("a probed wall is not in the world".into()))?;
+        let (x, p) = (
+            particles.fluid::<Position>()?,
+            particles.fluid::<Pressure>()?,
+        );
+        let at = wall.point(s.along + offset);
+        let carry = Carry {
+            rho0: sim.constants.eos.rho0,
+            g: sim.constants.gravity - wall.body.acceleration_at(at),
+        };
+        Ok(match m {
+            Method::Shepard => self.shepard(sim, particles, at)?,
+            Method::Nearest => nearest(sim, &x, &p, at, carry),
+            Method::Averaged => {
+                let shifted = PressureSensor {
+                    along: s.along + offset,
+                    ..s.clone()
+                };
+                averaged(sim, &x, &p, wall, &shifted, carry)
+            }
+        })
+    }
+
+    /// Sensor `s`'s pressure by method `m`, averaged over its face.
+    fn face(
+        &self,
+        sim: &Sim,
+        particles: Particles,
+        s: &PressureSensor,
+        m: Method,
+    ) -> Result<f64, StepError> {
+        let offsets = face_offsets(s.diameter, sim.constants.spacing);
+        let mut sum = 0.0;
+        for &o in &offsets {
+            sum += self.reading(sim, particles, s, m, o)?;
+        }
+        Ok(sum / offsets.len() as f64)
+    }
+
+    /// The face readings of the sensors with a time filter, in the filters' order.
+    fn filtered_readings(&self, sim: &Sim) -> Result<Vec<f64>, StepError> {
+        let Some(particles) = Particles::of(&sim.world) else {
+            return Ok(vec![0.0; self.filters.len()]);
+        };
+        let mut out = Vec::with_capacity(self.filters.len());
+        for s in self.sensors.iter().filter(|s| s.filter > 0.0) {
+            for &m in &self.params.methods {
+                out.push(self.face(sim, particles, s, m)?);
+            }
+        }
+        Ok(out)
     }
 
     /// Method I: Shepard interpolation of fluid and ghost pressures at `at`.

@@ -200,13 +200,25 @@ pub struct Tank {
 
 /// Where a wall sensor's pressure is read: abscissa `along` on the wall entity `wall`
 /// (so it rides with the wall), over a width `width` along the wall (Method III's
-/// pseudo-sensor).
+/// pseudo-sensor); with a transducer's face `diameter` and time `filter` window (0 for
+/// none), it also reads as such a transducer would.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PressureSensor {
     pub name: String,
     pub wall: hecs::Entity,
     pub along: f64,
     pub width: f64,
+    /// The transducer's face diameter [m]; 0 for a point.
+    pub diameter: f64,
+    /// The transducer's time-filter window [s]; 0 for none.
+    pub filter: f64,
+}
+
+impl PressureSensor {
+    /// Whether the sensor also reads as a transducer (a face or a filter).
+    pub fn transducer(&self) -> bool {
+        self.diameter > 0.0 || self.filter > 0.0
+    }
 }
 
 /// A wave gauge: free-surface elevation on the vertical line x = `x` of the tank frame,

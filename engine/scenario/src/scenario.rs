@@ -177,6 +177,14 @@ pub struct SensorSpec {
     /// Width along the wall [m] used by Method III. Default: 2 h.
     #[serde(default)]
     pub width: Option<Positive>,
+    /// A transducer's face diameter [m]: the `<sensor>.<method>.transducer` column
+    /// averages each method over the face. Default: none (a point).
+    #[serde(default)]
+    pub diameter: Option<Positive>,
+    /// A transducer's time-filter window [s]: that column is also the mean of every
+    /// step's reading over the window before each sample. Default: none.
+    #[serde(default)]
+    pub filter: Option<Positive>,
 }
 
 /// A wave gauge measuring the free-surface elevation on a vertical line.
@@ -745,6 +753,8 @@ impl Scenario {
                 wall,
                 along,
                 width,
+                diameter: s.diameter.map_or(0.0, |d| d.0),
+                filter: s.filter.map_or(0.0, |f| f.0),
             },));
         }
         for g in &self.spec.wave_gauges {

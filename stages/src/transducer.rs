@@ -1,0 +1,120 @@
+//! What makes a pressure sensor read like a transducer (docs/validation.md, "Pressure
+//! sensors"): a face of finite diameter, over which the pressure is averaged, and a
+//! time filter, the mean of the readings of every step over a window ending at the
+//! sample time (a box filter: what a transducer and its amplifier of about that
+//! response time record, or a record sampled at 1/window).
+
+use std::collections::VecDeque;
+
+/// Points across a face of `diameter`, as offsets along the wall from its centre:
+/// one point per quarter particle spacing `ds` (at least 3, at most 17), ends
+/// included; the centre alone for a point sensor.
+pub fn face_offsets(diameter: f64, ds: f64) -> Vec<f64> {
+    if !(diameter > 0.0 && ds > 0.0) {
+        return vec![0.0];
+    }
+    let n = ((diameter / (0.25 * ds)).ceil() as usize + 1).clamp(3, 17);
+    (0..n)
+        .map(|k| diameter * (k as f64 / (n - 1) as f64 - 0.5))
+        .collect()
+}
+
+/// A box filter over the last `window` seconds of readings, each weighted by the
+/// time since the reading before it.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct BoxFilter {
+    window: f64,
+    /// (time, weight, reading), oldest first.
+    readings: VecDeque<(f64, f64, f64)>,
+}
+
+impl BoxFilter {
+    pub fn new(window: f64) -> Self {
+        Self {
+            window,
+            readings: VecDeque::new(),
+        }
+    }
+
+    /// Adds the reading at time `t` (times increase), and drops those older than the
+    /// window.
+    pub fn push(&mut self, t: f64, reading: f64) {
+        let weight = self.readings.back().map_or(0.0, |&(last, _, _)| t - last);
+        self.readings.push_back((t, weight.max(0.0), reading));
+        while self
+            .readings
+            .front()
+            .is_some_and(|&(t0, _, _)| t0 < t - self.window)
+        {
+            self.readings.pop_front();
+        }
+    }
+
+    /// The weighted mean of the readings in the window (the plain mean while the
+    /// weights are all zero, at the first reading); 0 without readings.
+    pub fn mean(&self) -> f64 {
+        let (mut num, mut den) = (0.0, 0.0);
+        for &(_, w, r) in &self.readings {
+            num += w * r;
+            den += w;
+        }
+        if den > 0.0 {
+            num / den
+        } else if self.readings.is_empty() {
+            0.0
+        } else {
+            self.readings.iter().map(|r| r.2).sum::<f64>() / self.readings.len() as f64
+        }
+    }
+
+    /// The readings, for a checkpoint.
+    pub fn readings(&self) -> impl Iterator<Item = (f64, f64, f64)> + '_ {
+        self.readings.iter().copied()
+    }
+
+    /// Restores readings saved from [`BoxFilter::readings`].
+    pub fn restore(&mut self, readings: impl IntoIterator<Item = (f64, f64, f64)>) {
+        self.readings = readings.into_iter().collect();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A sine of period T averaged over a window T reads 0; over a window much
+    /// shorter than T it follows the sine, delayed by half the window.
+    #[test]
+    fn the_box_filter_averages_over_its_window() {
+        let period = 0.1;
+        let dt = 1e-4;
+        let mut long = BoxFilter::new(period);
+        let mut short = BoxFilter::new(period / 50.0);
+        for k in 0..5000 {
+            let t = k as f64 * dt;
+            let s = (std::f64::consts::TAU * t / period).sin();
+            long.push(t, s);
+            short.push(t, s);
+            if t > 2.0 * period {
+                // One reading more or less in the window: dt/T of the amplitude.
+                assert!(
+                    long.mean().abs() < 2.0 * dt / period,
+                    "t {t}: {}",
+                    long.mean()
+                );
+                let delayed = (std::f64::consts::TAU * (t - period / 100.0) / period).sin();
+                assert!((short.mean() - delayed).abs() < 0.01, "t {t}");
+            }
+        }
+    }
+
+    #[test]
+    fn faces_have_their_points_across_the_diameter() {
+        assert_eq!(face_offsets(0.0, 0.01), vec![0.0]);
+        let f = face_offsets(0.01, 0.01);
+        assert_eq!(f.len(), 5);
+        assert!((f[0] + 0.005).abs() < 1e-15 && (f[4] - 0.005).abs() < 1e-15);
+        assert_eq!(face_offsets(1.0, 0.01).len(), 17);
+        assert_eq!(face_offsets(f64::NAN, 0.01), vec![0.0]);
+    }
+}
