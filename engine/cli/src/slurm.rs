@@ -40,7 +40,43 @@ pub struct SubmitArgs {
 
 /// Seconds before the time limit at which Slurm warns the run's job shell (USR1), which
 /// passes it on to the engine as SIGTERM: time to finish a step and write a checkpoint.
-pub const WARN_BEFORE_LIMIT: u32 = 120;
+/// A quarter of a shorter `--time` given with `--sbatch`.
+pub const WARN_BEFORE_LIMIT: u64 = 120;
+
+/// The time limit in seconds of a `--time`/`-t` among the sbatch options (the last one),
+/// in Slurm's formats: minutes, minutes:seconds, hours:minutes:seconds, days-hours,
+/// days-hours:minutes, days-hours:minutes:seconds. None if absent, unlimited or unreadable.
+pub fn time_limit(options: &[String]) -> Option<u64> {
+    let value = options.iter().rev().find_map(|o| {
+        o.strip_prefix("--time=")
+            .or_else(|| o.strip_prefix("--time "))
+            .or_else(|| o.strip_prefix("-t"))
+            .map(|v| v.trim_start_matches('=').trim())
+    })?;
+    let (days, rest) = match value.split_once('-') {
+        Some((d, r)) => (Some(d.parse::<u64>().ok()?), r),
+        None => (None, value),
+    };
+    let parts: Vec<u64> = rest
+        .split(':')
+        .map(|p| p.parse::<u64>().ok())
+        .collect::<Option<_>>()?;
+    let seconds = match (days, parts.as_slice()) {
+        (None, [m]) => m * 60,
+        (None, [m, s]) => m * 60 + s,
+        (None, [h, m, s]) | (Some(_), [h, m, s]) => h * 3600 + m * 60 + s,
+        (Some(_), [h]) => h * 3600,
+        (Some(_), [h, m]) => h * 3600 + m * 60,
+        _ => return None,
+    };
+    Some(seconds + days.unwrap_or(0) * 86_400)
+}
+
+/// Seconds before the time limit for the warning: [`WARN_BEFORE_LIMIT`], or a quarter of
+/// a shorter limit given with `--sbatch=--time=...`.
+fn warning(options: &[String]) -> u64 {
+    time_limit(options).map_or(WARN_BEFORE_LIMIT, |t| WARN_BEFORE_LIMIT.min(t / 4).max(1))
+}
 
 /// `s` quoted for a POSIX shell.
 pub fn quote(s: &str) -> String {
@@ -350,6 +386,7 @@ pub fn submit_run(job: &RunJob, submit: &SubmitArgs) -> Result<String, String> {
     let dir = out.join("slurm");
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let script = dir.join("run.sbatch");
+    let warn = warning(&submit.sbatch);
     let opts = vec![
         format!("--job-name={}", quote(job.name)),
         format!("--chdir={}", quote_path(&cwd)),
@@ -358,7 +395,7 @@ pub fn submit_run(job: &RunJob, submit: &SubmitArgs) -> Result<String, String> {
         "--requeue".to_string(),
         "--ntasks=1".to_string(),
         format!("--cpus-per-task={}", job.threads),
-        format!("--signal=B:USR1@{WARN_BEFORE_LIMIT}"),
+        format!("--signal=B:USR1@{warn}"),
     ];
     let mut when = format!("--checkpoint-every {}", job.checkpoint_every);
     if let Some(t) = job.stop_at {
@@ -411,7 +448,6 @@ exit "$code"
         scenario = scenario.display(),
         out = out.display(),
         header = header(&opts, &submit.sbatch),
-        warn = WARN_BEFORE_LIMIT,
         scenario_q = quote_path(&scenario),
     );
     write_script(&script, &text)?;
@@ -501,6 +537,24 @@ mod tests {
             .output()
             .unwrap();
         assert_eq!(String::from_utf8_lossy(&out.stdout), text);
+    }
+
+    #[test]
+    fn time_limits_in_slurm_formats() {
+        let t = |s: &str| time_limit(&[s.to_string()]);
+        assert_eq!(t("--time=10"), Some(600));
+        assert_eq!(t("--time=10:30"), Some(630));
+        assert_eq!(t("--time=2:00:00"), Some(7200));
+        assert_eq!(t("--time=1-2"), Some(93_600));
+        assert_eq!(t("--time=1-0:30"), Some(88_200));
+        assert_eq!(t("--time=1-0:0:5"), Some(86_405));
+        assert_eq!(t("-t 5"), Some(300));
+        assert_eq!(t("--time=UNLIMITED"), None);
+        assert_eq!(t("--partition=x"), None);
+        // The warning: 120 s, or a quarter of a shorter limit.
+        assert_eq!(warning(&[]), 120);
+        assert_eq!(warning(&["--time=1".into()]), 15);
+        assert_eq!(warning(&["--time=1:00:00".into()]), 120);
     }
 
     #[test]

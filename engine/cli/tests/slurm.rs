@@ -2,8 +2,9 @@
 //! in a temporary folder runs (1) a three-case study submitted with `--submit slurm`,
 //! whose study.csv must equal that of the same study run here (wall times excepted), and
 //! (2) a run submitted with `--submit slurm`, sent SIGTERM with `scancel --signal=TERM`
-//! while it runs, requeued, and resumed from its checkpoint, whose probes.csv and
-//! energy.csv must equal an uninterrupted run's byte for byte.
+//! while it runs, requeued, resumed from its checkpoint, then sent the time limit's
+//! warning (USR1 to the job shell) and requeued again, whose probes.csv and energy.csv
+//! must equal an uninterrupted run's byte for byte.
 //!
 //! Without Slurm (sbatch, slurmctld, slurmd, munged) or root the tests print a loud
 //! SKIPPED line and pass; in CI (SPH_CI=1, set by .ci/run) they fail instead, and so
@@ -85,17 +86,21 @@ struct Cluster {
 impl Cluster {
     /// Starts the cluster, or returns None (after a loud SKIPPED line) where Slurm is
     /// not installed outside CI.
-    fn start(tag: &str, port: u16) -> Option<Self> {
+    fn start(tag: &str) -> Option<Self> {
         if let Some(why) = missing() {
             assert!(!in_ci(), "SPH_CI=1 but Slurm cannot run here: {why}");
-            eprintln!("\n*** SKIPPED: Slurm test `{tag}`: {why} ***\n");
+            // Straight to stderr, past the test harness's capture: seen in every run.
+            let _ = std::io::Write::write_all(
+                &mut std::io::stderr(),
+                format!("\n*** SKIPPED: Slurm test `{tag}`: {why} ***\n\n").as_bytes(),
+            );
             return None;
         }
         let dir = temp(&format!("cluster-{tag}"));
         let o = Command::new(repo().join("tests/slurm/cluster.sh"))
             .arg("start")
             .arg(&dir)
-            .env("SPH_SLURM_PORT", port.to_string())
+            .env("SPH_SLURM_PORT", free_ports().to_string())
             .output()
             .unwrap();
         let cluster = Self {
@@ -155,6 +160,16 @@ impl Cluster {
     }
 }
 
+/// The first N from 16817 up (by 2) with ports N and N + 1 free on 127.0.0.1, for
+/// slurmctld and slurmd.
+fn free_ports() -> u16 {
+    let free = |p: u16| std::net::TcpListener::bind(("127.0.0.1", p)).is_ok();
+    (16817..17817)
+        .step_by(2)
+        .find(|&p| free(p) && free(p + 1))
+        .expect("no two free ports between 16817 and 17817")
+}
+
 fn tail(p: &Path) -> String {
     let t = std::fs::read_to_string(p).unwrap_or_default();
     let lines: Vec<&str> = t.lines().collect();
@@ -194,7 +209,7 @@ fn read_csv(p: &Path) -> (Vec<String>, Vec<Vec<String>>) {
 #[test]
 fn a_study_submitted_to_slurm_reports_what_it_reports_here() {
     let _turn = TURN.lock().unwrap_or_else(|p| p.into_inner());
-    let Some(cluster) = Cluster::start("study", 16817) else {
+    let Some(cluster) = Cluster::start("study") else {
         return;
     };
     let clock = Instant::now();
@@ -323,7 +338,7 @@ const RUN_SETS: [&str; 7] = [
 #[test]
 fn a_run_preempted_by_sigterm_is_requeued_and_ends_as_an_uninterrupted_run() {
     let _turn = TURN.lock().unwrap_or_else(|p| p.into_inner());
-    let Some(cluster) = Cluster::start("run", 16827) else {
+    let Some(cluster) = Cluster::start("run") else {
         return;
     };
     let scenario = repo().join("scenarios/wave_maker.ron");
@@ -359,58 +374,61 @@ fn a_run_preempted_by_sigterm_is_requeued_and_ends_as_an_uninterrupted_run() {
     let id = job_id(&printed, "submitted job ");
     let out = std::fs::canonicalize(&out).unwrap();
     let log = out.join(format!("slurm/run.{id}.out"));
-    cluster.wait_state(&id, &["RUNNING"], Duration::from_secs(60), &log);
-    // Signal once the run is well under way: a third of the uninterrupted run's time.
+    // Two interruptions: SIGTERM to every process of the job, as at a preemption or the
+    // time limit; then USR1 to the job shell alone, as `--signal=B:USR1@120` sends
+    // before the time limit, which the shell passes on to the engine as SIGTERM.
+    let rounds = [
+        (["--signal=TERM", "--full"], "job shell: SIGTERM"),
+        (["--signal=USR1", "--batch"], "job shell: time limit near"),
+    ];
     let probes = out.join("probes.csv");
-    let start = Instant::now();
-    while !probes.exists() {
-        assert!(
-            start.elapsed() < Duration::from_secs(60),
-            "the run never started: {}",
-            tail(&log)
+    for (round, (signal, said)) in rounds.iter().enumerate() {
+        cluster.wait_state(&id, &["RUNNING"], Duration::from_secs(60), &log);
+        let start = Instant::now();
+        let started = format!("(restart {round})");
+        while !probes.exists() || !std::fs::read_to_string(&log).is_ok_and(|t| t.contains(&started))
+        {
+            assert!(
+                start.elapsed() < Duration::from_secs(60),
+                "the run never started: {}",
+                tail(&log)
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        // Well under way: a quarter of the uninterrupted run's time.
+        std::thread::sleep(Duration::from_secs_f64(uninterrupted / 4.0));
+        let o = cluster
+            .cmd("scancel")
+            .args(signal)
+            .arg(&id)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "scancel: {}", text(&o));
+        eprintln!(
+            "scancel {} {id} after {:.1} s",
+            signal.join(" "),
+            clock.elapsed().as_secs_f64()
         );
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    std::thread::sleep(Duration::from_secs_f64(uninterrupted / 3.0));
-    let o = cluster
-        .cmd("scancel")
-        .args(["--signal=TERM", "--full", &id])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "scancel: {}", text(&o));
-    eprintln!(
-        "scancel --signal=TERM --full {id} after {:.1} s",
-        clock.elapsed().as_secs_f64()
-    );
-    // Requeued: Slurm holds a requeued job back about two minutes (its BeginTime); bring
-    // that forward rather than wait.
-    let state = cluster.wait_state(
-        &id,
-        &["PENDING", "REQUEUED", "COMPLETED", "FAILED"],
-        Duration::from_secs(60),
-        &log,
-    );
-    assert!(
-        state == "PENDING" || state == "REQUEUED",
-        "job {id} {state}, not requeued: {}",
-        tail(&log)
-    );
-    let interrupted = std::fs::read_to_string(out.join("summary.json")).unwrap_or_default();
-    assert!(interrupted.contains("interrupted at step"), "{interrupted}");
-    let begin = Instant::now();
-    while cluster.job_field(&id, "JobState") != "PENDING" {
-        assert!(
-            begin.elapsed() < Duration::from_secs(60),
-            "job {id} not pending"
+        // Requeued: Slurm holds a requeued job back about two minutes (its BeginTime);
+        // bring that forward rather than wait.
+        let state = cluster.wait_state(
+            &id,
+            &["PENDING", "COMPLETED", "FAILED", "CANCELLED"],
+            Duration::from_secs(60),
+            &log,
         );
-        std::thread::sleep(Duration::from_millis(200));
+        assert_eq!(state, "PENDING", "job {id} not requeued: {}", tail(&log));
+        let summary = std::fs::read_to_string(out.join("summary.json")).unwrap_or_default();
+        assert!(summary.contains("interrupted at step"), "{summary}");
+        let log_text = std::fs::read_to_string(&log).unwrap_or_default();
+        assert!(log_text.contains(said), "{said:?} not in {log_text}");
+        let o = cluster
+            .cmd("scontrol")
+            .args(["update", &format!("JobId={id}"), "StartTime=now"])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "scontrol update: {}", text(&o));
     }
-    let o = cluster
-        .cmd("scontrol")
-        .args(["update", &format!("JobId={id}"), "StartTime=now"])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "scontrol update: {}", text(&o));
     let state = cluster.wait_state(
         &id,
         &["COMPLETED", "FAILED", "CANCELLED", "TIMEOUT", "NODE_FAIL"],
@@ -420,14 +438,17 @@ fn a_run_preempted_by_sigterm_is_requeued_and_ends_as_an_uninterrupted_run() {
     let log_text = std::fs::read_to_string(&log).unwrap_or_default();
     assert_eq!(state, "COMPLETED", "{log_text}");
     eprintln!(
-        "through Slurm with one requeue: {:.1} s\n--- {}:\n{log_text}",
+        "through Slurm with two requeues: {:.1} s\n--- {}:\n{log_text}",
         clock.elapsed().as_secs_f64(),
         log.display()
     );
-    assert_eq!(cluster.job_field(&id, "Restarts"), "1");
-    assert!(log_text.contains("(restart 1)"), "{log_text}");
-    assert!(
-        log_text.contains("engine stopped with a checkpoint: requeueing"),
+    assert_eq!(cluster.job_field(&id, "Restarts"), "2");
+    assert!(log_text.contains("(restart 2)"), "{log_text}");
+    assert_eq!(
+        log_text
+            .matches("engine stopped with a checkpoint: requeueing")
+            .count(),
+        2,
         "{log_text}"
     );
     let summary = std::fs::read_to_string(out.join("summary.json")).unwrap();
@@ -439,7 +460,7 @@ fn a_run_preempted_by_sigterm_is_requeued_and_ends_as_an_uninterrupted_run() {
         );
         assert!(
             a == b,
-            "{f}: {} bytes uninterrupted, {} through the requeue; they differ",
+            "{f}: {} bytes uninterrupted, {} through the requeues; they differ",
             a.len(),
             b.len()
         );
