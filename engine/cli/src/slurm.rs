@@ -412,8 +412,8 @@ pub fn submit_run(job: &RunJob, submit: &SubmitArgs) -> Result<String, String> {
 # Written by `engine SCENARIO --submit slurm`: runs {scenario} into {out} as a
 # preemptible job (docs/cluster.md). SIGTERM (preemption, `scancel --signal=TERM --full`,
 # the time limit) reaches the engine, which writes a checkpoint and exits with code 130;
-# this script then requeues the job, and the requeued job resumes from the checkpoint.
-# Outputs are those of an uninterrupted run, byte for byte.
+# this script then requeues the job if it is still running, and the requeued job resumes
+# from the checkpoint. Outputs are those of an uninterrupted run, byte for byte.
 {header}set -u
 out={out_q}
 threads="${{SLURM_CPUS_PER_TASK:-1}}"
@@ -436,11 +436,18 @@ while kill -0 "$pid" 2>/dev/null; do
     wait "$pid" || code=$?
 done
 if [ "$code" -eq 130 ]; then
-    echo "engine stopped with a checkpoint: requeueing job $SLURM_JOB_ID, $(date)"
-    if scontrol requeue "$SLURM_JOB_ID"; then
-        exit 0
+    # Requeue only a job still running (a signal, or the time limit's warning): not
+    # one cancelled (scancel ID), preempted (Slurm requeues it itself) or timed out.
+    state=$(scontrol show job "$SLURM_JOB_ID" 2>/dev/null | grep -o 'JobState=[A-Z_]*' | cut -d= -f2)
+    if [ "$state" = RUNNING ]; then
+        echo "engine stopped with a checkpoint: requeueing job $SLURM_JOB_ID, $(date)"
+        if scontrol requeue "$SLURM_JOB_ID"; then
+            exit 0
+        fi
+        echo "could not requeue job $SLURM_JOB_ID; continue with: sbatch {script_q}"
+    else
+        echo "engine stopped with a checkpoint; job $SLURM_JOB_ID is ${{state:-gone}} (cancelled, preempted or past its time limit): not requeued from here; continue with: sbatch {script_q}"
     fi
-    echo "could not requeue (Slurm may be requeueing it already); otherwise continue with: sbatch $0"
 fi
 echo "engine exited with code $code, $(date)"
 exit "$code"
@@ -449,6 +456,7 @@ exit "$code"
         out = out.display(),
         header = header(&opts, &submit.sbatch),
         scenario_q = quote_path(&scenario),
+        script_q = quote_path(&script),
     );
     write_script(&script, &text)?;
     let mut msg = String::new();

@@ -321,6 +321,33 @@ fn a_study_submitted_to_slurm_reports_what_it_reports_here() {
         .unwrap();
     let status = text(&o);
     assert!(status.contains("3 cases: 3 finished"), "{status}");
+    // A case killed on another node leaves running.txt with its Slurm job: squeue tells
+    // that the job has ended, so the case reads interrupted, not running.
+    let case = there.join("c0_20.0");
+    std::fs::remove_file(case.join("summary.json")).unwrap();
+    std::fs::write(
+        case.join("running.txt"),
+        format!("node99 12345 {array}_1\n"),
+    )
+    .unwrap();
+    let o = cluster
+        .cmd(ENGINE)
+        .args([
+            "study",
+            file.to_str().unwrap(),
+            "--out",
+            there.to_str().unwrap(),
+            "--status",
+        ])
+        .output()
+        .unwrap();
+    let status = text(&o);
+    assert!(
+        status.contains(&format!(
+            "c0_20.0  interrupted    pid 12345 (Slurm job {array}_1)"
+        )),
+        "{status}"
+    );
     assert!(status.contains(&format!("report job {report}")), "{status}");
 }
 
@@ -409,8 +436,10 @@ fn a_run_preempted_by_sigterm_is_requeued_and_ends_as_an_uninterrupted_run() {
             signal.join(" "),
             clock.elapsed().as_secs_f64()
         );
-        // Requeued: Slurm holds a requeued job back about two minutes (its BeginTime);
-        // bring that forward rather than wait.
+        // Requeued: Slurm holds a requeued job back about two minutes (its BeginTime),
+        // as the node refuses the job id's credentials issued in the second it was
+        // revoked ("Job credential revoked"); bring that forward to 3 s after it rather
+        // than wait.
         let state = cluster.wait_state(
             &id,
             &["PENDING", "COMPLETED", "FAILED", "CANCELLED"],
@@ -422,6 +451,7 @@ fn a_run_preempted_by_sigterm_is_requeued_and_ends_as_an_uninterrupted_run() {
         assert!(summary.contains("interrupted at step"), "{summary}");
         let log_text = std::fs::read_to_string(&log).unwrap_or_default();
         assert!(log_text.contains(said), "{said:?} not in {log_text}");
+        std::thread::sleep(Duration::from_secs(3));
         let o = cluster
             .cmd("scontrol")
             .args(["update", &format!("JobId={id}"), "StartTime=now"])
@@ -453,6 +483,38 @@ fn a_run_preempted_by_sigterm_is_requeued_and_ends_as_an_uninterrupted_run() {
     );
     let summary = std::fs::read_to_string(out.join("summary.json")).unwrap();
     assert!(summary.contains("\"status\": \"completed\""), "{summary}");
+    // Cancelled (plain scancel: SIGTERM, then the job ends): checkpointed, not requeued.
+    let cancelled = temp("run-cancelled");
+    let o = cluster
+        .cmd(ENGINE)
+        .arg(&scenario)
+        .args(["--out", cancelled.to_str().unwrap()])
+        .args(&sets)
+        .args(["--submit", "slurm"])
+        .output()
+        .unwrap();
+    let id = job_id(&text(&o), "submitted job ");
+    let log = std::fs::canonicalize(&cancelled)
+        .unwrap()
+        .join(format!("slurm/run.{id}.out"));
+    cluster.wait_state(&id, &["RUNNING"], Duration::from_secs(60), &log);
+    let start = Instant::now();
+    while !cancelled.join("probes.csv").exists() {
+        assert!(start.elapsed() < Duration::from_secs(60), "{}", tail(&log));
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    std::thread::sleep(Duration::from_secs(1));
+    assert!(cluster.cmd("scancel").arg(&id).status().unwrap().success());
+    let state = cluster.wait_state(
+        &id,
+        &["CANCELLED", "PENDING", "COMPLETED"],
+        Duration::from_secs(60),
+        &log,
+    );
+    let log_text = std::fs::read_to_string(&log).unwrap_or_default();
+    assert_eq!(state, "CANCELLED", "{log_text}");
+    assert!(log_text.contains("not requeued from here"), "{log_text}");
+    assert!(cancelled.join("checkpoint.bin").is_file(), "{log_text}");
     for f in ["probes.csv", "energy.csv"] {
         let (a, b) = (
             std::fs::read(reference.join(f)).unwrap(),

@@ -3,8 +3,9 @@
 //!
 //! A case being run holds `running.txt` in its folder (host, process id and, under
 //! Slurm, the job id), removed when the run ends. A marker left behind by a process
-//! that no longer exists on this host is a case that was killed (`interrupted`); one
-//! from another host cannot be checked from here and is shown as running there.
+//! that no longer exists on this host, or by a Slurm job that `squeue` no longer shows
+//! pending or running, is a case that was killed (`interrupted`); one from another host
+//! that neither can tell about is shown as running there.
 
 use super::{case_text, Case, Study};
 use std::path::Path;
@@ -71,7 +72,10 @@ impl CaseState {
                     s += &format!(", Slurm job {j}");
                 }
                 if host != &this_host() {
-                    s += " (another host: not checked from here)";
+                    s += match job.as_deref().and_then(slurm_job_active) {
+                        Some(_) => " (squeue: active)",
+                        None => " (another host: not checked from here)",
+                    };
                 }
                 match time {
                     Some(t) => s + &format!("; probes.csv at t = {t} s"),
@@ -124,6 +128,37 @@ fn process_alive(pid: u32) -> Option<bool> {
         .then(|| Path::new(&format!("/proc/{pid}")).exists())
 }
 
+/// Whether Slurm still has job `id` (e.g. `4711_3`) pending or running, from `squeue`;
+/// `None` where that cannot be told (no squeue, no answer from the controller).
+fn slurm_job_active(id: &str) -> Option<bool> {
+    let out = std::process::Command::new("squeue")
+        .args(["-h", "-o", "%T", "-j", id])
+        .stdin(std::process::Stdio::null())
+        .output()
+        .ok()?;
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    if !out.status.success() {
+        // A job the controller has forgotten.
+        return String::from_utf8_lossy(&out.stderr)
+            .contains("Invalid job id")
+            .then_some(false);
+    }
+    let active = [
+        "PENDING",
+        "RUNNING",
+        "COMPLETING",
+        "CONFIGURING",
+        "SUSPENDED",
+        "REQUEUED",
+        "REQUEUE_HOLD",
+        "REQUEUE_FED",
+        "RESIZING",
+        "SIGNALING",
+        "STAGE_OUT",
+    ];
+    Some(stdout.lines().any(|l| active.contains(&l.trim())))
+}
+
 /// The last complete row's time in `probes.csv`.
 fn last_time(file: &Path) -> Option<f64> {
     let text = std::fs::read_to_string(file).ok()?;
@@ -166,7 +201,12 @@ pub fn case_state(dir: &Path, case: &Case) -> CaseState {
         return CaseState::Interrupted { pid: 0, job: None };
     };
     let job = words.next().map(String::from);
-    if host == this_host() && process_alive(pid) == Some(false) {
+    let gone = if host == this_host() {
+        process_alive(pid) == Some(false)
+    } else {
+        job.as_deref().and_then(slurm_job_active) == Some(false)
+    };
+    if gone {
         return CaseState::Interrupted { pid, job };
     }
     CaseState::Running {
