@@ -16,7 +16,7 @@ pub struct StudyArgs {
     #[arg(long = "set", value_name = "PATH=VALUE")]
     pub sets: Vec<String>,
     /// Cases run at the same time [default: one per core, at most one per case].
-    #[arg(long)]
+    #[arg(long, conflicts_with = "submit")]
     pub workers: Option<usize>,
     /// Threads per case [default: the cores left per worker, at least 1].
     #[arg(long)]

@@ -180,6 +180,15 @@ fn one_case_runs_as_the_study_runs_it_and_status_reads_the_folders() {
     assert!(e.contains("c0_20.0, c0_30.0, c0_40.0"), "{e}");
     let e = study_err(&out, &["--case", "1", "--report-only"]);
     assert!(e.contains("cannot be used with"), "{e}");
+    // case.txt alone (killed before its marker was written, or by an older engine).
+    std::fs::remove_file(out.join(c3).join("summary.json")).unwrap();
+    std::fs::remove_file(out.join(c3).join("running.txt")).unwrap();
+    let status = study_ok(&out, &["--status"]);
+    assert_eq!(state_of(&status, c3), "interrupted", "{status}");
+    assert!(
+        status.contains("case.txt without summary.json or running.txt"),
+        "{status}"
+    );
 }
 
 /// The id of a process that has exited.

@@ -82,6 +82,10 @@ impl CaseState {
                     None => s,
                 }
             }
+            Self::Interrupted { pid: 0, job: None } => {
+                "case.txt without summary.json or running.txt: the run was killed; run the case again"
+                    .into()
+            }
             Self::Interrupted { pid, job } => {
                 let job = job
                     .as_ref()
