@@ -2,6 +2,7 @@
 //! `engine::main_with(registry)` after registering its stages.
 
 pub mod bench;
+pub mod slurm;
 pub mod study;
 
 use clap::{Parser, Subcommand};
@@ -97,6 +98,8 @@ pub struct RunArgs {
     pub quiet: bool,
     #[command(flatten)]
     pub checkpoints: CheckpointArgs,
+    #[command(flatten)]
+    pub submit: slurm::SubmitArgs,
 }
 
 /// Parses the command line and runs; the exit code is non-zero on any error.
@@ -213,6 +216,9 @@ pub fn run_scenario(args: &RunArgs, registry: &StageRegistry) -> Result<ExitCode
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("out").join(&scenario.spec.name));
+    if args.submit.submit.is_some() {
+        return slurm::submit_scenario(args, path, &scenario, &out_dir).map(|()| ExitCode::SUCCESS);
+    }
     if scenario.spec.sweep.is_some() {
         if args.checkpoints.checkpoint_every.is_some() || args.checkpoints.stop_at.is_some() {
             return Err("--checkpoint-every and --stop-at do not apply to a sweep".into());

@@ -2,7 +2,7 @@
 //! report.md and the figures (see `sph_study::study`).
 
 use sph_core::StageRegistry;
-use sph_study::study::{run_study, Study, StudyOptions};
+use sph_study::study::{find_case, run_one_case, run_study, status, Study, StudyOptions};
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug, Clone)]
@@ -16,7 +16,7 @@ pub struct StudyArgs {
     #[arg(long = "set", value_name = "PATH=VALUE")]
     pub sets: Vec<String>,
     /// Cases run at the same time [default: one per core, at most one per case].
-    #[arg(long)]
+    #[arg(long, conflicts_with = "submit")]
     pub workers: Option<usize>,
     /// Threads per case [default: the cores left per worker, at least 1].
     #[arg(long)]
@@ -25,6 +25,17 @@ pub struct StudyArgs {
     /// have finished (the others are rows `not run`), e.g. while a long study runs.
     #[arg(long)]
     pub report_only: bool,
+    /// Run case K alone (its number, 1 to the number of cases, or its folder name),
+    /// exactly as the study runs it: into <out>/<case>/, skipped if finished there. What
+    /// a task of the --submit slurm job array runs. Writes no study.csv.
+    #[arg(long, value_name = "K", conflicts_with_all = ["report_only", "workers", "status", "submit"])]
+    pub case: Option<String>,
+    /// Print a table of the cases, read from their folders: finished, stopped early,
+    /// running, interrupted, not started. Runs nothing.
+    #[arg(long, conflicts_with_all = ["report_only", "workers", "threads", "submit"])]
+    pub status: bool,
+    #[command(flatten)]
+    pub submit: crate::slurm::SubmitArgs,
 }
 
 /// Runs the study and prints one line per case and where the results are.
@@ -45,6 +56,33 @@ pub fn main(args: &StudyArgs, registry: &StageRegistry) -> Result<(), String> {
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("out/studies").join(&study.spec.name));
+    if args.status {
+        return status(&study, &out);
+    }
+    if let Some(k) = &args.case {
+        return one_case(&study, k, &out, args.threads.unwrap_or(cores), registry);
+    }
+    if args.submit.submit.is_some() {
+        if args.report_only {
+            return Err("--report-only runs nothing: drop it from --submit, whose report job writes the report".into());
+        }
+        let pending: Vec<usize> = status::study_status(&study, &out)
+            .into_iter()
+            .filter(|(_, s)| !s.is_done())
+            .map(|(k, _)| k)
+            .collect();
+        let job = crate::slurm::StudyJob {
+            name: &study.spec.name,
+            study_file: &args.study,
+            sets: &args.sets,
+            out: &out,
+            threads: args.threads.unwrap_or(1),
+            cases: study.cases.len(),
+            pending: &pending,
+        };
+        println!("{}", crate::slurm::submit_study(&job, &args.submit)?);
+        return Ok(());
+    }
     println!(
         "study {}: {} cases, {workers} at a time on {threads} thread(s) each, into {}",
         study.spec.name,
@@ -66,5 +104,56 @@ pub fn main(args: &StudyArgs, registry: &StageRegistry) -> Result<(), String> {
         start.elapsed().as_secs_f64(),
         out.display()
     );
+    Ok(())
+}
+
+/// `--case K`: runs one case as the study would, and prints its row's status.
+fn one_case(
+    study: &Study,
+    k: &str,
+    out: &std::path::Path,
+    threads: usize,
+    registry: &StageRegistry,
+) -> Result<(), String> {
+    let index = find_case(study, k)?;
+    let n = study.cases.len();
+    let name = &study.cases[index].name;
+    let dir = out.join(name);
+    println!(
+        "study {}: case {}/{n} {name} on {threads} thread(s), into {}",
+        study.spec.name,
+        index + 1,
+        dir.display()
+    );
+    let (ran, row) = run_one_case(study, index, out, threads, registry)?;
+    if ran {
+        println!(
+            "case {}/{n} {name}: {} ({:.1} s wall, {:.3e} particle-steps/s)",
+            index + 1,
+            row.status,
+            row.wall_seconds,
+            row.particle_steps_per_second
+        );
+    } else {
+        println!(
+            "case {}/{n} {name}: finished earlier ({}), skipped",
+            index + 1,
+            row.status
+        );
+    }
+    Ok(())
+}
+
+/// `--status`: the cases' table, and the last Slurm submission if there was one.
+fn status(study: &Study, out: &std::path::Path) -> Result<(), String> {
+    let states = status::study_status(study, out);
+    println!("study {} in {}:", study.spec.name, out.display());
+    print!("{}", status::status_table(study, &states));
+    if let Some(line) = crate::slurm::last_submission(out) {
+        println!(
+            "last submitted to Slurm: {line} ({})",
+            out.join("slurm").join("jobs.txt").display()
+        );
+    }
     Ok(())
 }

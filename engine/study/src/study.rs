@@ -12,6 +12,7 @@
 
 pub mod figures;
 pub mod metrics;
+pub mod status;
 
 use crate::series::read_series;
 use glam::DVec2;
@@ -495,6 +496,22 @@ fn run_case(
     }
     sph_core::atomic::write_atomic(&dir.join("case.txt"), case_text(case).as_bytes())
         .map_err(|e| format!("{}: {e}", dir.display()))?;
+    // Who runs the case, for `--status`; removed when the run ends however it ends.
+    let marker = dir.join(status::RUNNING);
+    sph_core::atomic::write_atomic(&marker, status::marker_text().as_bytes())
+        .map_err(|e| format!("{}: {e}", marker.display()))?;
+    let result = run_case_marked(study, case, dir, threads, registry);
+    let _ = std::fs::remove_file(&marker);
+    result
+}
+
+fn run_case_marked(
+    study: &Study,
+    case: &Case,
+    dir: &Path,
+    threads: usize,
+    registry: &StageRegistry,
+) -> Result<(), String> {
     let scenario =
         Scenario::load(&study.scenario, &case.overrides, registry).map_err(|e| e.to_string())?;
     let opts = RunOptions::quiet(dir, threads);
@@ -518,6 +535,53 @@ fn run_case(
         Err(RunError::Step { .. }) => Ok(()),
         Err(e) => Err(e.to_string()),
     }
+}
+
+/// The case a `--case K` argument names: its number in the study (1 to the number
+/// of cases, as `engine study` and `--status` count them) or its folder name.
+pub fn find_case(study: &Study, k: &str) -> Result<usize, String> {
+    let n = study.cases.len();
+    if let Ok(number) = k.trim().parse::<usize>() {
+        return if (1..=n).contains(&number) {
+            Ok(number - 1)
+        } else {
+            Err(format!(
+                "--case {k}: study {} has cases 1 to {n}",
+                study.spec.name
+            ))
+        };
+    }
+    study.cases.iter().position(|c| c.name == k).ok_or_else(|| {
+        let names: Vec<&str> = study.cases.iter().map(|c| c.name.as_str()).collect();
+        format!(
+            "--case {k}: no case of study {} has that number or name; its cases are 1 to {n}: {}",
+            study.spec.name,
+            names.join(", ")
+        )
+    })
+}
+
+/// Runs case `index` (0-based) alone, exactly as [`run_study`] runs it: into
+/// `<out_dir>/<case>/` with its `case.txt`, skipped if that folder already holds its
+/// finished run. Writes no study.csv (the report does, e.g. `--report-only`). Returns
+/// whether it ran and its row.
+pub fn run_one_case(
+    study: &Study,
+    index: usize,
+    out_dir: &Path,
+    threads: usize,
+    registry: &StageRegistry,
+) -> Result<(bool, Row), String> {
+    let case = study
+        .cases
+        .get(index)
+        .ok_or_else(|| format!("study {} has no case {}", study.spec.name, index + 1))?;
+    let dir = out_dir.join(&case.name);
+    if finished(&dir, case) {
+        return Ok((false, evaluate(study, case, &dir, false, None, registry)));
+    }
+    run_case(study, case, &dir, threads, registry)?;
+    Ok((true, evaluate(study, case, &dir, true, None, registry)))
 }
 
 /// How [`run_study`] runs the cases.
