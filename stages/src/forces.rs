@@ -12,7 +12,7 @@ use sph_core::components::{Acceleration, DensityRate, Fluid};
 use sph_core::contract::Access;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{require_neighbours, ArtificialViscosity, ViscousDissipation};
+use sph_core::vocab::{require_neighbours, ArtificialViscosity, ViscousDissipation, WallPower};
 use sph_core::world::ensure_component;
 use sph_core::StageRegistry;
 
@@ -85,6 +85,14 @@ impl Stage for Forces {
         if let Some(d) = sim.resources.get_mut::<ViscousDissipation>() {
             d.power = power;
         }
+        // The walls' work on the fluid, for the energy budget: a second pass over the
+        // ghost neighbours only (stages/src/wall_work.rs).
+        if sim.resources.contains::<WallPower>() {
+            let power = crate::wall_work::power(sim, &self.terms)?;
+            if let Some(w) = sim.resources.get_mut::<WallPower>() {
+                w.power = power;
+            }
+        }
         Ok(())
     }
 
@@ -104,7 +112,8 @@ impl Stage for Forces {
         let access = rates::declare_reads(Access::new(), reads)
             .writes::<Acceleration>()
             .writes_if::<DensityRate>(continuity)
-            .writes::<ViscousDissipation>();
+            .writes::<ViscousDissipation>()
+            .writes::<WallPower>();
         match viscosity {
             Some(v) => access.exposes(v),
             None => access,

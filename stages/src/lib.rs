@@ -23,6 +23,7 @@ pub mod snapshots;
 pub mod sort_particles;
 pub mod terms;
 pub mod vtk_frames;
+pub(crate) mod wall_work;
 
 use sph_core::StageRegistry;
 
