@@ -45,7 +45,8 @@ pub struct Params {
     pub restore_density_on_reflection: bool,
     /// Least density, as a fraction f of rho_0: after every step a fluid particle's
     /// density (and its half-step density) below f rho_0 is raised to f rho_0, and the
-    /// particle-steps so raised are counted in the `density_floored` diagnostic. Meant
+    /// particle-steps so raised are counted in the `density_floored` diagnostic (and the
+    /// particle flagged `Guarded::FLOORED`, so probes report it apart). Meant
     /// with `Eos(min_pressure: 0)` and f < 1: every density below rho_0 then has zero
     /// pressure, so the floor changes no pressure, only the volume m/rho a thinned
     /// particle brings to the Shepard sums and the mean density of the viscosity. It
