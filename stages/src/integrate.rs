@@ -261,7 +261,8 @@ impl Stage for Integrate {
                 rho.0 = rh.0 + 0.5 * dt * r.0;
                 let hit = reflect && self.reflect(floor, reach, x, v, vh, rho, rh);
                 let raised = least.is_some_and(|least| raise_to_floor(least, rho, rh));
-                guarded.0 |= (hit as u8) * Guarded::REFLECTED | (raised as u8) * Guarded::FLOORED;
+                guarded.0 |=
+                    ((hit as u8) * Guarded::REFLECTED) | ((raised as u8) * Guarded::FLOORED);
                 let p = x.0;
                 let ok = p.is_finite()
                     && rho.0.is_finite()

@@ -606,7 +606,8 @@ impl Probe {
         let (step, top) = (0.25 * c.spacing, (c.domain.1 - c.domain.0).length());
         let mut y = 0.5 * c.spacing;
         let mut phi = fraction(y);
-        if !(phi >= 0.5) {
+        // Dry, or a non-finite fraction (the guard stops such a run).
+        if phi.is_nan() || phi < 0.5 {
             return Ok(0.0);
         }
         while y < top {
