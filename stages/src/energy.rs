@@ -1,10 +1,17 @@
 //! Energy budget (docs/physics.md, "Energy budget"): kinetic sum m|v|^2/2, potential
-//! -sum m g.x (zero at y = 0), internal sum m e(rho) with e the Tait internal energy,
-//! and viscous, the work dissipated by the artificial viscosity integrated over time.
-//! Written to `energy.csv` (time, kinetic, potential, internal, viscous, total) and
-//! plotted. Place it after Integrate: it integrates the dissipation rate the forces
-//! stage reported over the step just taken. Energy exchanged with the walls through the
-//! ghosts is not tracked, so `total` drifts by that work (a diagnostic, not a bug).
+//! -sum m g.x (zero at y = 0), internal sum m e(rho) with e the Tait internal energy;
+//! the energy dissipated (`viscous`, the artificial and laminar viscosities) and the work
+//! done on the fluid (`wall_work`, by the walls through the ghosts, moving or not;
+//! `diffusion`, the internal energy a density-diffusion term adds or takes), each
+//! the time integral of the rate the forces stage reported; `total` = kinetic +
+//! potential + internal + dissipated, and `closure_error` = total - (total at t = 0 +
+//! work in), which is zero for an energy-conserving scheme up to the time-integration
+//! error (the guards, the density filter and the pressure floor show up in it).
+//! Written to `energy.csv` and plotted. Place it after Integrate: it integrates the
+//! rates the forces stage reported over the step just taken.
+//!
+//! The accumulated entries are a table ([`BUDGET`]): a new dissipation or work figure
+//! is one more row, with the resource its rate comes from.
 
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc, Resuming};
@@ -13,12 +20,74 @@ use sph_core::contract::Access;
 use sph_core::series::SeriesWriter;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::ViscousDissipation;
+use sph_core::vocab::{DiffusionPower, ViscousDissipation, WallPower};
 use sph_core::world::{sum_fixed, Particles};
 use sph_core::StageRegistry;
 use sph_output::SeriesPlot;
 
-const COLUMNS: [&str; 5] = ["kinetic", "potential", "internal", "viscous", "total"];
+/// Whether an accumulated entry is energy the fluid lost or work done on it.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    /// Energy taken out of kinetic + potential + internal (counted into `total`).
+    Dissipated,
+    /// Work done on the fluid from outside (subtracted in `closure_error`).
+    WorkIn,
+}
+
+/// One time-integrated entry of the budget: its column, its kind, and where its rate
+/// comes from this step.
+struct Entry {
+    column: &'static str,
+    kind: Kind,
+    /// The rate [W per metre of depth] a stage before Energy reported this step.
+    rate: fn(&Sim) -> f64,
+    /// Inserts the resource that asks the reporting stage for the rate.
+    ask: fn(&mut Sim),
+}
+
+/// The accumulated entries, in column order (and checkpoint order).
+const BUDGET: [Entry; 3] = [
+    Entry {
+        column: "viscous",
+        kind: Kind::Dissipated,
+        rate: |sim| {
+            sim.resources
+                .get::<ViscousDissipation>()
+                .map_or(0.0, |d| d.power)
+        },
+        ask: |sim| sim.resources.insert(ViscousDissipation::default()),
+    },
+    Entry {
+        column: "wall_work",
+        kind: Kind::WorkIn,
+        rate: |sim| sim.resources.get::<WallPower>().map_or(0.0, |w| w.power),
+        ask: |sim| sim.resources.insert(WallPower::default()),
+    },
+    Entry {
+        // The internal energy a density diffusion adds (negative: takes out),
+        // sum_i m_i (p_i/rho_i^2) D_i: the diffusion is not a pair force, so nothing
+        // else balances it.
+        column: "diffusion",
+        kind: Kind::WorkIn,
+        rate: |sim| {
+            sim.resources
+                .get::<DiffusionPower>()
+                .map_or(0.0, |d| d.power)
+        },
+        ask: |sim| sim.resources.insert(DiffusionPower::default()),
+    },
+];
+
+/// The stored energies, in column order.
+const STORED: [&str; 3] = ["kinetic", "potential", "internal"];
+
+/// The columns of energy.csv after `time`.
+fn columns() -> Vec<&'static str> {
+    let mut c = STORED.to_vec();
+    c.extend(BUDGET.iter().map(|e| e.column));
+    c.extend(["total", "closure_error"]);
+    c
+}
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -41,7 +110,7 @@ impl Default for Params {
 pub fn register(registry: &mut StageRegistry) {
     registry.register_checked(
         "energy",
-        "kinetic, potential, internal and viscous energy to energy.csv",
+        "kinetic, potential, internal, dissipated energy and wall work to energy.csv",
         |p: Params| {
             if !(p.interval >= 0.0 && p.interval.is_finite()) {
                 return Err(sph_core::ParamError::new(
@@ -52,7 +121,8 @@ pub fn register(registry: &mut StageRegistry) {
             }
             Ok(Energy {
                 params: p,
-                viscous: 0.0,
+                accumulated: [0.0; BUDGET.len()],
+                initial: 0.0,
                 next: 0.0,
                 out: None,
             })
@@ -62,7 +132,10 @@ pub fn register(registry: &mut StageRegistry) {
 
 pub struct Energy {
     params: Params,
-    viscous: f64,
+    /// The time integral of each [`BUDGET`] entry's rate so far [J/m].
+    accumulated: [f64; BUDGET.len()],
+    /// `total` at t = 0 [J/m].
+    initial: f64,
     next: f64,
     out: Option<SeriesWriter>,
 }
@@ -93,8 +166,10 @@ impl Stage for Energy {
     }
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
-        sim.resources.insert(ViscousDissipation::default());
-        let columns = COLUMNS.iter().map(|c| c.to_string()).collect();
+        for entry in &BUDGET {
+            (entry.ask)(sim);
+        }
+        let columns = columns().iter().map(|c| c.to_string()).collect();
         let path = sim.out_dir.join("energy.csv");
         let mut out = SeriesWriter::open_sampled(sim, &path, columns, self.params.interval)
             .map_err(|m| SetupError::new("energy", m))?;
@@ -102,8 +177,9 @@ impl Stage for Energy {
         // run has it already.
         if sim.resources.get::<Resuming>().is_none() {
             let setup_err = |e: StepError| SetupError::new("energy", e.to_string());
-            let [k, p, i] = energies(sim).map_err(setup_err)?;
-            out.push(sim.clock.time, vec![k, p, i, 0.0, k + p + i])
+            let stored = energies(sim).map_err(setup_err)?;
+            self.initial = stored.iter().sum();
+            out.push(sim.clock.time, self.row(stored))
                 .map_err(setup_err)?;
             self.next = sim.clock.time + self.params.interval;
         }
@@ -117,34 +193,36 @@ impl Stage for Energy {
             out.flush()?;
         }
         let mut e = Enc::default();
-        e.f64(self.viscous);
+        for a in self.accumulated {
+            e.f64(a);
+        }
+        e.f64(self.initial);
         e.f64(self.next);
         Ok(e.into_bytes())
     }
 
     fn load_state(&mut self, _sim: &mut Sim, state: &[u8]) -> Result<(), sph_core::StateError> {
         let mut d = Dec::new(state);
-        self.viscous = d.f64()?;
+        for a in &mut self.accumulated {
+            *a = d.f64()?;
+        }
+        self.initial = d.f64()?;
         self.next = d.f64()?;
         d.end()
     }
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
-        let power = sim
-            .resources
-            .get::<ViscousDissipation>()
-            .map_or(0.0, |d| d.power);
-        self.viscous += power * sim.clock.dt;
+        // The rates belong to the state at the start of the step just taken.
+        for (a, entry) in self.accumulated.iter_mut().zip(&BUDGET) {
+            *a += (entry.rate)(sim) * sim.clock.dt;
+        }
         if sim.clock.time + 1e-12 < self.next {
             return Ok(());
         }
         self.next = sim.clock.time + self.params.interval;
-        let [k, p, i] = energies(sim)?;
+        let row = self.row(energies(sim)?);
         if let Some(out) = &mut self.out {
-            out.push(
-                sim.clock.time,
-                vec![k, p, i, self.viscous, k + p + i + self.viscous],
-            )?;
+            out.push(sim.clock.time, row)?;
         }
         Ok(())
     }
@@ -160,7 +238,7 @@ impl Stage for Energy {
                 &sim.out_dir.join("energy.png"),
                 &title,
                 "energy [J/m]",
-                &COLUMNS,
+                &columns(),
             )?;
         }
         Ok(())
@@ -174,5 +252,25 @@ impl Stage for Energy {
             .reads::<Density>()
             .reads::<Mass>()
             .uses::<ViscousDissipation>()
+            .uses::<WallPower>()
+    }
+}
+
+impl Energy {
+    /// A row of energy.csv from the stored energies now and the accumulated entries:
+    /// total = stored + dissipated, closure_error = total - (initial + work in).
+    fn row(&self, stored: [f64; 3]) -> Vec<f64> {
+        let mut total: f64 = stored.iter().sum();
+        let mut work = 0.0;
+        for (a, entry) in self.accumulated.iter().zip(&BUDGET) {
+            match entry.kind {
+                Kind::Dissipated => total += a,
+                Kind::WorkIn => work += a,
+            }
+        }
+        let mut row = stored.to_vec();
+        row.extend(self.accumulated);
+        row.extend([total, total - (self.initial + work)]);
+        row
     }
 }

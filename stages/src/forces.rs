@@ -13,7 +13,7 @@ use sph_core::contract::Access;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{
-    require_neighbours, ArtificialViscosity, DiffusionPower, ViscousDissipation,
+    require_neighbours, ArtificialViscosity, DiffusionPower, ViscousDissipation, WallPower,
 };
 use sph_core::world::ensure_component;
 use sph_core::StageRegistry;
@@ -91,6 +91,14 @@ impl Stage for Forces {
         if let Some(d) = sim.resources.get_mut::<DiffusionPower>() {
             d.power = power.diffusion;
         }
+        // The walls' work on the fluid, for the energy budget: a second pass over the
+        // ghost neighbours only (stages/src/wall_work.rs).
+        if sim.resources.contains::<WallPower>() {
+            let power = crate::wall_work::power(sim, &self.terms)?;
+            if let Some(w) = sim.resources.get_mut::<WallPower>() {
+                w.power = power;
+            }
+        }
         Ok(())
     }
 
@@ -111,7 +119,8 @@ impl Stage for Forces {
             .writes::<Acceleration>()
             .writes_if::<DensityRate>(continuity)
             .writes::<ViscousDissipation>()
-            .writes::<DiffusionPower>();
+            .writes::<DiffusionPower>()
+            .writes::<WallPower>();
         match viscosity {
             Some(v) => access.exposes(v),
             None => access,

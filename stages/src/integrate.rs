@@ -16,7 +16,7 @@ use sph_core::components::{Acceleration, Density, DensityRate, Fluid, Position, 
 use sph_core::contract::Access;
 use sph_core::sim::{Clock, Sim};
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{BodyPose, HalfDensity, HalfVelocity, WallPose, Walls};
+use sph_core::vocab::{BodyPose, Guarded, HalfDensity, HalfVelocity, WallPose, Walls};
 use sph_core::world::{archetype, column_mut, ensure_component};
 use sph_core::StageRegistry;
 
@@ -45,7 +45,8 @@ pub struct Params {
     pub restore_density_on_reflection: bool,
     /// Least density, as a fraction f of rho_0: after every step a fluid particle's
     /// density (and its half-step density) below f rho_0 is raised to f rho_0, and the
-    /// particle-steps so raised are counted in the `density_floored` diagnostic. Meant
+    /// particle-steps so raised are counted in the `density_floored` diagnostic (and the
+    /// particle flagged `Guarded::FLOORED`, so probes report it apart). Meant
     /// with `Eos(min_pressure: 0)` and f < 1: every density below rho_0 then has zero
     /// pressure, so the floor changes no pressure, only the volume m/rho a thinned
     /// particle brings to the Shepard sums and the mean density of the viscosity. It
@@ -127,17 +128,19 @@ impl Stage for Integrate {
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         ensure_component::<Fluid, HalfVelocity>(sim);
         ensure_component::<Fluid, HalfDensity>(sim);
+        ensure_component::<Fluid, Guarded>(sim);
         Ok(())
     }
 
-    /// The first step (the collapse reference) and the half-step columns; the walls
-    /// follow the clock.
+    /// The first step (the collapse reference), the half-step columns and the guard
+    /// flags; the walls follow the clock.
     fn save_state(&mut self, sim: &Sim) -> Result<Vec<u8>, StepError> {
         let mut e = Enc::default();
         e.opt_f64(self.first_dt);
         let fluid = archetype::<Fluid>(&sim.world);
         put_column::<HalfVelocity>(&mut e, fluid);
         put_column::<HalfDensity>(&mut e, fluid);
+        put_column::<Guarded>(&mut e, fluid);
         Ok(e.into_bytes())
     }
 
@@ -147,6 +150,7 @@ impl Stage for Integrate {
         let fluid = archetype::<Fluid>(&sim.world);
         get_column::<HalfVelocity>(&mut d, fluid)?;
         get_column::<HalfDensity>(&mut d, fluid)?;
+        get_column::<Guarded>(&mut d, fluid)?;
         d.end()
     }
 
@@ -173,6 +177,7 @@ impl Stage for Integrate {
         let mut rho = column_mut::<Density>(fluid)?;
         let mut vh = column_mut::<HalfVelocity>(fluid)?;
         let mut rh = column_mut::<HalfDensity>(fluid)?;
+        let mut guarded = column_mut::<Guarded>(fluid)?;
 
         let ext = tracing::info_span!("time_step").in_scope(|| Extremes::of(&v, acc, rate, &rho));
         if !ext.finite {
@@ -237,12 +242,13 @@ impl Stage for Integrate {
             &mut rho[..],
             &mut vh[..],
             &mut rh[..],
+            &mut guarded[..],
             acc,
             rate,
         )
             .into_par_iter()
             .enumerate()
-            .map(|(i, (x, v, rho, vh, rh, a, r))| {
+            .map(|(i, (x, v, rho, vh, rh, guarded, a, r))| {
                 let (vhalf, rhalf) = if first_step {
                     (v.0, rho.0)
                 } else {
@@ -255,6 +261,8 @@ impl Stage for Integrate {
                 rho.0 = rh.0 + 0.5 * dt * r.0;
                 let hit = reflect && self.reflect(floor, reach, x, v, vh, rho, rh);
                 let raised = least.is_some_and(|least| raise_to_floor(least, rho, rh));
+                guarded.0 |=
+                    ((hit as u8) * Guarded::REFLECTED) | ((raised as u8) * Guarded::FLOORED);
                 let p = x.0;
                 let ok = p.is_finite()
                     && rho.0.is_finite()
@@ -302,6 +310,7 @@ impl Stage for Integrate {
             .writes::<Density>()
             .writes::<HalfVelocity>()
             .writes::<HalfDensity>()
+            .writes::<Guarded>()
     }
 }
 

@@ -25,6 +25,7 @@ pub mod sort_particles;
 pub mod terms;
 pub mod transducer;
 pub mod vtk_frames;
+pub(crate) mod wall_work;
 
 use sph_core::StageRegistry;
 

@@ -41,7 +41,7 @@ use sph_core::motion::Pose;
 use sph_core::series::SeriesWriter;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{BodyPose, Neighbours, Piston, WallPose};
+use sph_core::vocab::{BodyPose, Guarded, Neighbours, Piston, WallPose};
 use sph_core::world::{archetype, column, Particles};
 use sph_core::StageRegistry;
 use sph_output::SeriesPlot;
@@ -78,7 +78,12 @@ pub struct Params {
     pub front: bool,
     /// Column height: largest y of fluid at the left wall (x < ds), plus ds/2. Default false.
     pub column_height: bool,
-    /// Maximum |rho/rho_0 - 1| over the fluid. Default false.
+    /// Maximum |rho/rho_0 - 1| over the fluid particles no safeguard has acted on
+    /// (`max_density_fluctuation`: the flow's own), the same over the particles one has
+    /// (`guarded_density_fluctuation`, 0 if none), how many those are
+    /// (`guarded_particles`), and the guards' actions since the previous sample:
+    /// particle-steps raised to the density floor (`floored`) and wall reflections
+    /// (`reflected`). Default false.
     pub density_fluctuation: bool,
     /// Maximum fluid speed [m/s]. Default false.
     pub max_speed: bool,
@@ -133,6 +138,7 @@ pub fn register(registry: &mut StageRegistry) {
                 piston: None,
                 next: 0.0,
                 filters: Vec::new(),
+                guard_counts: [0.0; 2],
                 out: None,
             })
         },
@@ -151,8 +157,17 @@ pub struct Probe {
     /// The time filters of the sensors that have one, a filter per method, in sensor
     /// then method order.
     filters: Vec<BoxFilter>,
+    /// The guard diagnostics ([`GUARD_COUNTS`]) at the previous sample.
+    guard_counts: [f64; 2],
     out: Option<SeriesWriter>,
 }
+
+/// The cumulative guard counters of `Sim::diagnostics` (written by `Integrate`) and the
+/// probes.csv columns that give their increase over each sampling interval.
+const GUARD_COUNTS: [(&str, &str); 2] = [
+    ("density_floored", "floored"),
+    ("wall_reflections", "reflected"),
+];
 
 impl Stage for Probe {
     fn name(&self) -> &'static str {
@@ -180,6 +195,12 @@ impl Stage for Probe {
         if needs_grid && !sim.resources.contains::<Neighbours>() {
             return Err(err(
                 "Method I (Shepard) needs the neighbour grid: put NeighbourGrid() before Probe()"
+                    .into(),
+            ));
+        }
+        if !self.gauges.is_empty() && !sim.resources.contains::<Neighbours>() {
+            return Err(err(
+                "wave gauges need the neighbour grid (the fluid fraction along the gauge line): put NeighbourGrid() before Probe()"
                     .into(),
             ));
         }
@@ -222,7 +243,8 @@ impl Stage for Probe {
         Ok(())
     }
 
-    /// Flushes probes.csv; keeps the next sample time.
+    /// Flushes probes.csv; keeps the next sample time and the guard counts at the last
+    /// sample.
     fn save_state(&mut self, _sim: &Sim) -> Result<Vec<u8>, StepError> {
         if let Some(out) = &mut self.out {
             out.flush()?;
@@ -238,6 +260,9 @@ impl Stage for Probe {
                 e.f64(w);
                 e.f64(r);
             }
+        }
+        for c in self.guard_counts {
+            e.f64(c);
         }
         Ok(e.into_bytes())
     }
@@ -260,6 +285,9 @@ impl Stage for Probe {
             }
             f.restore(readings);
         }
+        for c in &mut self.guard_counts {
+            *c = d.f64()?;
+        }
         d.end()
     }
 
@@ -274,7 +302,19 @@ impl Stage for Probe {
             return Ok(());
         }
         self.next = sim.clock.time + self.params.interval;
-        let row = self.sample(sim)?;
+        let mut row = self.sample(sim)?;
+        if self.params.density_fluctuation {
+            // The guards' actions since the previous sample, after the guard columns
+            // `sample` wrote (the counters only grow).
+            let at = self.columns().iter().position(|c| c == "floored");
+            for (k, (diagnostic, _)) in GUARD_COUNTS.iter().enumerate() {
+                let now = sim.diagnostics.get(*diagnostic).copied().unwrap_or(0.0);
+                if let Some(cell) = at.and_then(|at| row.get_mut(at + k)) {
+                    *cell = now - self.guard_counts[k];
+                }
+                self.guard_counts[k] = now;
+            }
+        }
         if let Some(out) = &mut self.out {
             out.push(sim.clock.time, row)?;
         }
@@ -331,12 +371,17 @@ impl Stage for Probe {
             )?;
         }
         if self.params.density_fluctuation {
-            let name = "max_density_fluctuation";
             out.plot(
                 &dir.join("probe_density.png"),
-                &title(name),
+                &title("largest density fluctuation: flow and guarded particles"),
                 "max |rho/rho_0 - 1|",
-                &[name],
+                &["max_density_fluctuation", "guarded_density_fluctuation"],
+            )?;
+            out.plot(
+                &dir.join("probe_guards.png"),
+                &title("safeguards: actions per sampling interval, particles touched"),
+                "count",
+                &["floored", "reflected", "guarded_particles"],
             )?;
         }
         if self.params.max_speed {
@@ -388,9 +433,8 @@ impl Stage for Probe {
     }
 
     /// Samples the fluid and the walls where the world has them; the neighbour grid
-    /// for Method I (when there are sensors) and the piston force.
+    /// for Method I (when there are sensors), the wave gauges and the piston force.
     fn access(&self) -> Access {
-        let shepard = self.params.methods.contains(&Method::Shepard);
         let access = Access::new()
             .reads::<Position>()
             .reads::<Velocity>()
@@ -402,8 +446,10 @@ impl Stage for Probe {
             .reads_if::<Neighbours>(self.params.piston)
             .reads_if::<NeighbourCount>(self.params.neighbours)
             .reads_if::<Acceleration>(self.params.roll_moment)
+            .uses::<Guarded>()
             .uses::<Ghost>();
-        if shepard && !self.params.piston {
+        // The gauges (read from the world at setup) need the grid too; setup checks.
+        if !self.params.piston {
             access.uses::<Neighbours>()
         } else {
             access
@@ -428,7 +474,13 @@ impl Probe {
             (self.params.column_height, &["column_height"][..]),
             (
                 self.params.density_fluctuation,
-                &["max_density_fluctuation"][..],
+                &[
+                    "max_density_fluctuation",
+                    "guarded_density_fluctuation",
+                    "guarded_particles",
+                    "floored",
+                    "reflected",
+                ][..],
             ),
             (self.params.max_speed, &["max_speed"][..]),
             (
@@ -475,7 +527,7 @@ impl Probe {
             }
         }
         for g in &self.gauges {
-            row.push(gauge(&x, g.x, ds, self.moving.then_some(pose)));
+            row.push(self.gauge(sim, particles, g.x, pose)?);
         }
         if self.params.front {
             let front = x
@@ -496,11 +548,21 @@ impl Probe {
         if self.params.density_fluctuation {
             let rho = particles.fluid::<Density>()?;
             let rho0 = sim.constants.eos.rho0;
-            row.push(
-                rho.iter()
-                    .map(|r| (r.0 / rho0 - 1.0).abs())
-                    .fold(0.0, f64::max),
-            );
+            // Without an integrator's flags, no guard has acted.
+            let flags = particles.fluid.get::<&Guarded>();
+            let untouched = |i: usize| flags.as_ref().is_none_or(|f| f[i].untouched());
+            let (mut flow, mut guarded, mut count) = (0.0_f64, 0.0_f64, 0usize);
+            for (i, r) in rho.iter().enumerate() {
+                let d = (r.0 / rho0 - 1.0).abs();
+                if untouched(i) {
+                    flow = flow.max(d);
+                } else {
+                    guarded = guarded.max(d);
+                    count += 1;
+                }
+            }
+            // floored, reflected: filled in by `run` from the diagnostics.
+            row.extend([flow, guarded, count as f64, 0.0, 0.0]);
         }
         if self.params.max_speed {
             let v = particles.fluid::<Velocity>()?;
@@ -610,6 +672,56 @@ impl Probe {
         Ok(out)
     }
 
+    /// Wave gauge at tank-frame abscissa `x`: the free surface is the lowest height y
+    /// above the bottom (in the tank frame, along the tank's vertical) where the
+    /// kernel-interpolated fluid fraction along the vertical line,
+    ///   phi(y) = sum_j (m_j / rho_j) W(|(x, y) - x_j|)   (fluid and ghosts),
+    /// falls below 1/2, marching up from half a spacing above the bottom in steps of
+    /// ds/4 and interpolating linearly between the last two points. It is the surface of
+    /// the water connected to the bottom: drops and spray above it do not count, a wet
+    /// patch at the gauge too thin to reach phi = 1/2 reads 0 (dry), and so does a
+    /// gauge with phi < 1/2 at its foot (docs/physics.md, "Other probes").
+    fn gauge(&self, sim: &Sim, particles: Particles, x: f64, pose: Pose) -> Result<f64, StepError> {
+        let Some(nb) = sim.resources.get::<Neighbours>() else {
+            return Ok(0.0);
+        };
+        let (xj, rho, m) = (
+            particles.joined::<Position>()?,
+            particles.joined::<Density>()?,
+            particles.joined::<Mass>()?,
+        );
+        let (xj, rho, m) = (xj.view(), rho.view(), m.view());
+        let c = &sim.constants;
+        let fraction = |y: f64| {
+            let at = if self.moving {
+                pose.to_world(DVec2::new(x, y))
+            } else {
+                DVec2::new(x, y)
+            };
+            let mut phi = 0.0;
+            nb.grid.for_each_near(at, |j| {
+                let w = kernel::w(c.kernel, c.h, (at - xj.get(j).0).length());
+                phi += m.get(j).0 / rho.get(j).0 * w;
+            });
+            phi
+        };
+        let (step, top) = (0.25 * c.spacing, (c.domain.1 - c.domain.0).length());
+        let mut y = 0.5 * c.spacing;
+        let mut phi = fraction(y);
+        // Dry, or a non-finite fraction (the guard stops such a run).
+        if phi.is_nan() || phi < 0.5 {
+            return Ok(0.0);
+        }
+        while y < top {
+            let (y1, phi1) = (y + step, fraction(y + step));
+            if phi1 < 0.5 {
+                return Ok(y + step * (phi - 0.5) / (phi - phi1));
+            }
+            (y, phi) = (y1, phi1);
+        }
+        Ok(y)
+    }
+
     /// Method I: Shepard interpolation of fluid and ghost pressures at `at`.
     fn shepard(&self, sim: &Sim, particles: Particles, at: DVec2) -> Result<f64, StepError> {
         let Some(nb) = sim.resources.get::<Neighbours>() else {
@@ -644,22 +756,6 @@ struct Carry {
 impl Carry {
     fn carry(self, p: f64, from: DVec2, to: DVec2) -> f64 {
         p + self.rho0 * self.g.dot(to - from)
-    }
-}
-
-/// Free-surface elevation at tank-frame abscissa `x`: the highest fluid particle within
-/// ds of the line, plus ds/2, measured in the tank frame when `pose` is given. 0 if dry.
-fn gauge(positions: &[Position], x: f64, ds: f64, pose: Option<Pose>) -> f64 {
-    let top = positions
-        .iter()
-        .map(|q| pose.map_or(q.0, |p| p.to_body(q.0)))
-        .filter(|q| (q.x - x).abs() < ds)
-        .map(|q| q.y)
-        .fold(f64::NEG_INFINITY, f64::max);
-    if top.is_finite() {
-        top + 0.5 * ds
-    } else {
-        0.0
     }
 }
 

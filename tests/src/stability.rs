@@ -162,9 +162,11 @@ impl Stability {
         let probes = self.out.join("probes.csv");
         let rho = column(&probes, "max_density_fluctuation")
             .expect("the scenario needs Probe(density_fluctuation: true)");
+        // The bound is on every particle: the flow's figure and the guarded particles'.
+        let guarded = column(&probes, "guarded_density_fluctuation").unwrap_or_default();
         // NaN-propagating: a NaN sample makes the measure NaN (then infinite, below).
         let max = |s: &[(f64, f64)]| s.iter().map(|p| p.1).fold(0.0, nan_max);
-        self.density_fluctuation = max(&rho);
+        self.density_fluctuation = nan_max(max(&rho), max(&guarded));
         self.max_speed = column(&probes, "max_speed").map_or(0.0, |s| max(&s));
         self.time = total.last().map_or(0.0, |p| p.0);
         let mechanical: Vec<f64> = kinetic

@@ -304,6 +304,9 @@ impl Enc {
     pub fn bool(&mut self, v: bool) {
         self.0.push(v as u8);
     }
+    pub fn u8(&mut self, v: u8) {
+        self.0.push(v);
+    }
     pub fn opt_f64(&mut self, v: Option<f64>) {
         self.bool(v.is_some());
         self.f64(v.unwrap_or(0.0));
@@ -359,6 +362,9 @@ impl<'a> Dec<'a> {
     pub fn bool(&mut self) -> Result<bool, StateError> {
         Ok(self.take(1)?[0] != 0)
     }
+    pub fn u8(&mut self) -> Result<u8, StateError> {
+        Ok(self.take(1)?[0])
+    }
     pub fn opt_f64(&mut self) -> Result<Option<f64>, StateError> {
         let some = self.bool()?;
         let v = self.f64()?;
@@ -410,6 +416,16 @@ impl Field for f64 {
     }
     fn get(d: &mut Dec) -> Result<Self, StateError> {
         d.f64()
+    }
+}
+
+impl Field for u8 {
+    const BYTES: usize = 1;
+    fn put(&self, e: &mut Enc) {
+        e.u8(*self);
+    }
+    fn get(d: &mut Dec) -> Result<Self, StateError> {
+        d.u8()
     }
 }
 

@@ -14,6 +14,10 @@
 //!   written by `DensityGradient`, read by the delta-SPH term.
 //! - [`DiffusionPower`]: the internal-energy change rate of a density diffusion,
 //!   asked for by `Energy` and filled in by `Forces`.
+//! - [`WallPower`]: the rate of work the walls do on the fluid through the ghosts,
+//!   asked for by `Energy` and filled in by `Forces`.
+//! - [`Guarded`]: per fluid particle, which safeguards have acted on it (`Integrate`
+//!   sets, `Probe` reads).
 //! - [`ArtificialViscosity`]: the viscosity coefficients the momentum stage exposes
 //!   (for a sweep's linear-theory damping).
 //! - [`ContinuityInPipeline`]: marks that a continuity stage writes the density rate.
@@ -231,7 +235,26 @@ pub struct HalfVelocity(pub DVec2);
 #[derive(Clone, Copy, Debug, Default)]
 pub struct HalfDensity(pub f64);
 
-crate::checkpoint_newtype!(HalfVelocity(DVec2), HalfDensity(f64));
+crate::checkpoint_newtype!(HalfVelocity(DVec2), HalfDensity(f64), Guarded(u8));
+
+/// What the safeguards outside the model have done to a fluid particle so far in the
+/// run (docs/physics.md, "Safeguards outside the model"): bit flags, [`Guarded::FLOORED`]
+/// and [`Guarded::REFLECTED`], set by the integrator and never cleared, so diagnostics
+/// can report the flow apart from what the guards did (`Probe`'s
+/// `max_density_fluctuation` is over particles with no flag).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Guarded(pub u8);
+
+impl Guarded {
+    /// The density floor raised the particle's density (or half-step density).
+    pub const FLOORED: u8 = 1;
+    /// The particle was reflected at a wall (and its density restored, if asked).
+    pub const REFLECTED: u8 = 2;
+    /// No guard has acted on the particle.
+    pub fn untouched(self) -> bool {
+        self.0 == 0
+    }
+}
 
 /// Work dissipated by the artificial viscosity: the forces stage stores its rate here
 /// each step when a stage that reports energy has asked for it (by inserting it).
@@ -254,6 +277,19 @@ pub struct DensityGradients(pub Vec<glam::DVec2>);
 #[derive(Debug, Default, Clone, Copy)]
 pub struct DiffusionPower {
     /// Rate of internal-energy change this step [W per metre of depth].
+    pub power: f64,
+}
+
+/// Work the walls do on the fluid through the ghost particles: the forces stage stores
+/// its rate here each step when a stage that reports energy has asked for it (by
+/// inserting it). It is the rate at which the ghost pairs change the fluid's energy
+/// E = kinetic + potential + internal + dissipated (docs/physics.md, "Energy budget"):
+/// sum_i [ m_i a_i^g . v_i + m_i (p_i/rho_i^2) (d rho_i/dt)^g + D_i^g ], with a^g,
+/// (d rho/dt)^g and D^g the acceleration, density rate and dissipation rate from the
+/// ghost neighbours alone.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct WallPower {
+    /// Rate of work done on the fluid this step [W per metre of depth].
     pub power: f64,
 }
 

@@ -1,0 +1,84 @@
+//! The rate of work the walls do on the fluid through the ghost particles
+//! (docs/physics.md, "Energy budget"), summed by `Forces` when `Energy` asks for it
+//! (`vocab::WallPower`).
+//!
+//! Every pair of fluid particles conserves E = kinetic + potential + internal +
+//! dissipated: the pressure force's work on the pair is what the pair's continuity
+//! takes from the internal energy, and the artificial viscosity's is what it adds to the
+//! dissipated energy. A ghost neighbour is not integrated, so its pair with a fluid
+//! particle i changes E by
+//!
+//!   m_i a_i^g . v_i  +  m_i (p_i / rho_i^2) (d rho_i/dt)^g  +  D_i^g
+//!
+//! with a^g, (d rho/dt)^g and D^g the acceleration, the density rate and the
+//! dissipation rate the pair terms give from i's ghost neighbours alone, and p_i the
+//! Tait pressure of rho_i (the slope of the internal energy). Summed over the fluid,
+//! that is the power the walls put in: zero for a still wall up to the mirror's
+//! imperfections, the pressure times the wall's normal speed for a moving one. The
+//! terms are the forces' own, with the continuity term added if the forces do not sum
+//! it (a `Continuity()` stage then does).
+
+use crate::terms::{continuity, RateTerms};
+use sph_core::components::{Density, Mass, Velocity};
+use sph_core::pair::{with_records, EquationsOfMotion, Pass, RateTerm};
+use sph_core::sim::Sim;
+use sph_core::stage::StepError;
+use sph_core::vocab::Neighbours;
+use sph_core::with_kernel;
+use sph_core::world::sum_fixed;
+
+/// The walls' power on the fluid [W per metre of depth] from the state the forces just
+/// used; 0 without ghosts. Summed in fixed chunks in order ([`sum_fixed`]), so the
+/// same for any thread count.
+pub(crate) fn power(sim: &mut Sim, terms: &RateTerms) -> Result<f64, StepError> {
+    let terms = RateTerms {
+        continuity: Some(continuity::Continuity),
+        ..*terms
+    };
+    let eom = EquationsOfMotion(terms);
+    let power = with_records(sim, terms.reads(), |sim, particles, records| {
+        let Some(nb) = sim.resources.get::<Neighbours>() else {
+            return Ok(0.0);
+        };
+        if nb.n_ghost == 0 {
+            return Ok(0.0);
+        }
+        let n = nb.n_fluid;
+        let (v, rho, m) = (
+            particles.fluid::<Velocity>()?,
+            particles.fluid::<Density>()?,
+            particles.fluid::<Mass>()?,
+        );
+        let (v, rho, m): (&[Velocity], &[Density], &[Mass]) = (&v, &rho, &m);
+        if [v.len(), rho.len(), m.len()].iter().any(|&len| len != n) {
+            return Err(StepError::Internal(format!(
+                "the neighbour lists cover {n} fluid particles but the world holds {}",
+                v.len()
+            )));
+        }
+        let c = &sim.constants;
+        let eos = c.eos;
+        with_kernel!(c.kernel, c.h, |k| {
+            let pass =
+                Pass::new(&eom, k, records).map_err(|e| StepError::Internal(e.to_string()))?;
+            Ok::<f64, StepError>(sum_fixed(n, |i| {
+                let ghosts: Vec<u32> = nb
+                    .of(i)
+                    .iter()
+                    .copied()
+                    .filter(|&j| j as usize >= n)
+                    .collect();
+                if ghosts.is_empty() {
+                    return 0.0;
+                }
+                let s = pass.sum(i, &ghosts);
+                let r = rho[i].0;
+                // A density diffusion's share of the ghost pairs is booked apart
+                // (`vocab::DiffusionPower`), so it is taken out here.
+                m[i].0 * (s.acc.dot(v[i].0) + eos.pressure(r) / (r * r) * s.drho) + s.power
+                    - s.diffusion
+            }))
+        })
+    })?;
+    Ok(power.unwrap_or(0.0))
+}
