@@ -1,5 +1,5 @@
-//! The `engine` command's progress output, run as a user runs it: the binary with
-//! its stderr piped (not a terminal).
+//! The `engine` command's own errors and its progress output, run as a user runs it:
+//! the binary with its stderr piped (not a terminal).
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -89,4 +89,105 @@ fn progress_is_printed_as_lines_when_stderr_is_not_a_terminal() {
         stderr(&bad)
     );
     let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn negative_numbers_get_a_clear_error() {
+    let dam = shipped("dam_break.ron").display().to_string();
+    let study = shipped("studies/kernel.ron").display().to_string();
+    for (args, expect) in [
+        (
+            vec![dam.as_str(), "--threads", "-1"],
+            "--threads takes a positive whole number",
+        ),
+        (
+            vec![dam.as_str(), "--threads", "0"],
+            "--threads takes a positive whole number",
+        ),
+        (
+            vec![dam.as_str(), "--stop-at", "-1"],
+            "--stop-at takes seconds of simulated time > 0",
+        ),
+        (
+            vec![dam.as_str(), "--checkpoint-every", "-0.5"],
+            "--checkpoint-every takes seconds of simulated time > 0",
+        ),
+        (
+            vec!["resume", "somewhere", "--threads", "-2"],
+            "--threads takes a positive whole number",
+        ),
+        (
+            vec!["study", study.as_str(), "--workers", "-2"],
+            "--workers takes a positive whole number",
+        ),
+        (
+            vec!["bench", "--threads", "1,-1"],
+            "--threads takes a positive whole number",
+        ),
+    ] {
+        let o = engine(&args, &[]);
+        let err = stderr(&o);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        assert!(
+            err.contains(expect),
+            "{args:?}: `{expect}` missing from:\n{err}"
+        );
+        assert!(!err.contains("unexpected argument"), "{args:?}: {err}");
+    }
+}
+
+#[test]
+fn resume_says_when_the_folder_does_not_exist() {
+    let missing = temp("no-such-run");
+    let o = engine(&["resume", &missing.display().to_string()], &[]);
+    let err = stderr(&o);
+    assert!(!o.status.success());
+    assert!(
+        err.contains(&format!(
+            "{}: no such folder (expected a run's output folder holding checkpoint.bin",
+            missing.display()
+        )),
+        "{err}"
+    );
+    let file = shipped("dam_break.ron");
+    let o = engine(&["resume", &file.display().to_string()], &[]);
+    assert!(
+        stderr(&o).contains(": not a folder (expected"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn a_missing_study_file_is_called_the_study_file() {
+    let o = engine(&["study", "no_such_study.ron"], &[]);
+    let err = stderr(&o);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("error: no_such_study.ron: cannot read the study file:"),
+        "{err}"
+    );
+    assert!(!err.contains("field `study`"), "{err}");
+}
+
+#[test]
+fn set_errors_name_the_set_argument() {
+    let dam = shipped("dam_break.ron").display().to_string();
+    let set = "pipeline.forces.terms.artificial_viscosity.alfa=0.1";
+    let o = engine(&[&dam, "--set", set], &[]);
+    let err = stderr(&o);
+    assert!(!o.status.success());
+    assert!(
+        err.contains(&format!("dam_break.ron: --set {set}: field `alfa`: ")),
+        "{err}"
+    );
+    assert!(err.contains("did you mean `alpha`?"), "{err}");
+    let o = engine(&[&dam, "--set", "reinitialise.every"], &[]);
+    let err = stderr(&o);
+    assert!(
+        err.contains(
+            "expected `path=value`, e.g. `end_time=0.5` or `pipeline.reinitialise.every=5`"
+        ),
+        "{err}"
+    );
 }
