@@ -191,3 +191,25 @@ fn set_errors_name_the_set_argument() {
         "{err}"
     );
 }
+
+/// README's command list names every subcommand of `engine`.
+#[test]
+fn readme_lists_every_command() {
+    use clap::CommandFactory;
+    let readme =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../README.md"))
+            .expect("README.md");
+    let start = readme
+        .find("## Command line")
+        .expect("a Command line section");
+    let block = &readme[start..];
+    let block = &block[..block.find("```\n\n").expect("the command block ends")];
+    for sub in engine::Cli::command().get_subcommands() {
+        let line = format!("\nengine {}", sub.get_name());
+        assert!(
+            block.contains(&line),
+            "README's command list lacks `engine {}`",
+            sub.get_name()
+        );
+    }
+}
