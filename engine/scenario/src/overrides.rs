@@ -516,13 +516,12 @@ fn single_value(text: &str) -> Result<(), SyntaxError> {
     }
 }
 
-/// Finds the text range an override replaces, its replacement and, for each path
-/// segment, the range of the struct, list or map that holds it.
-fn resolve(
-    src: &str,
-    root: &Node<'_>,
-    ov: &Override,
-) -> Result<(Range<usize>, String, Vec<Range<usize>>), String> {
+/// What an override does to the text: the range it replaces, the replacement and, for
+/// each path segment, the range of the struct, list or map that holds it.
+type Edit = (Range<usize>, String, Vec<Range<usize>>);
+
+/// Finds the [`Edit`] of an override.
+fn resolve(src: &str, root: &Node<'_>, ov: &Override) -> Result<Edit, String> {
     let value = &ov.value;
     let mut node = root;
     let mut holders = Vec::new();
