@@ -198,8 +198,7 @@ fn cases() -> Vec<Case> {
             LineOf("Forcez("),
             AbsentOr(&["pipeline"]),
             &[
-                "unknown stage `Forcez`",
-                "nearest: `Forces`",
+                "unknown stage `Forcez`; did you mean `Forces`?",
                 "known stages:",
                 "GhostWalls",
                 "NeighbourGrid",
@@ -232,7 +231,7 @@ fn cases() -> Vec<Case> {
             dam_stage("Forces", "Forces(terms: [ArtificialViscosity(alfa: 0.1)])"),
             LineOf("Forces(terms"),
             AbsentOr(&["alfa", "pipeline"]),
-            &["`alfa`", "alpha", "beta"],
+            &["`alfa`", "alpha", "beta", "did you mean `alpha`?"],
         ),
         case(
             "unknown pair term",
@@ -335,6 +334,31 @@ fn cases() -> Vec<Case> {
             ],
         ),
         case(
+            "negative ParticlesAcross",
+            dam_value("resolution", "ParticlesAcross(-100)"),
+            LineOf("resolution:"),
+            Is("resolution"),
+            &[
+                "ParticlesAcross(-100) is out of range",
+                "ParticlesAcross takes a whole number of particles across the first fluid block, 2 or more",
+                "e.g. ParticlesAcross(40)",
+            ],
+        ),
+        case(
+            "fractional ParticlesAcross",
+            dam_value("resolution", "ParticlesAcross(40.5)"),
+            LineOf("resolution:"),
+            Is("resolution"),
+            &["ParticlesAcross(40.5) is not a whole number", "e.g. ParticlesAcross(40)"],
+        ),
+        case(
+            "ParticlesAcross beyond u32",
+            dam_value("resolution", "ParticlesAcross(99999999999)"),
+            LineOf("resolution:"),
+            Is("resolution"),
+            &["ParticlesAcross(99999999999) is out of range", "2 or more"],
+        ),
+        case(
             "ParticlesAcross(1)",
             dam_value("resolution", "ParticlesAcross(1)"),
             LineOf("resolution:"),
@@ -406,7 +430,7 @@ fn cases() -> Vec<Case> {
                 &[
                     "--set fluidd.density=1200",
                     "no field `fluidd`",
-                    "nearest: fluid",
+                    "did you mean `fluid`?",
                 ],
             )
         },
@@ -417,19 +441,57 @@ fn cases() -> Vec<Case> {
                 DAM.to_string(),
                 Nowhere,
                 AbsentOr(&[]),
-                &["no element `forcez`", "neighbour_grid", "nearest: forces"],
+                &[
+                    "--set pipeline.forcez.alpha=0.1: ",
+                    "no element `forcez`",
+                    "neighbour_grid",
+                    "did you mean `forces`?",
+                ],
             )
         },
         Case {
-            // A misspelt leaf is inserted into its struct, so the loader refuses it as
-            // an unknown field where it was inserted: just after `Scenario(`.
+            // A misspelt leaf is inserted into its struct, and the loader refuses it as
+            // an unknown field: the error is the `--set` argument's, at no place in the
+            // file (which does not hold that text).
             overrides: &["end_tme=1.0"],
             ..case(
                 "misspelt --set field",
                 DAM.to_string(),
-                LineOf("Scenario("),
+                Nowhere,
                 AbsentOr(&["end_tme"]),
-                &["`end_tme`", "end_time"],
+                &[
+                    "--set end_tme=1.0: ",
+                    "`end_tme`",
+                    "did you mean `end_time`?",
+                ],
+            )
+        },
+        Case {
+            overrides: &["pipeline.forces.terms.artificial_viscosity.alfa=0.1"],
+            ..case(
+                "misspelt --set term parameter",
+                DAM.to_string(),
+                Nowhere,
+                AbsentOr(&["alfa"]),
+                &[
+                    "--set pipeline.forces.terms.artificial_viscosity.alfa=0.1: ",
+                    "`alfa`",
+                    "`alpha` or `beta`",
+                    "did you mean `alpha`?",
+                ],
+            )
+        },
+        Case {
+            overrides: &["pipeline.reinitialise.filter=Shephard"],
+            ..case(
+                "misspelt --set variant",
+                DAM.to_string(),
+                Nowhere,
+                Is("filter"),
+                &[
+                    "--set pipeline.reinitialise.filter=Shephard: ",
+                    "did you mean `Shepard`?",
+                ],
             )
         },
         Case {
@@ -437,9 +499,74 @@ fn cases() -> Vec<Case> {
             ..case(
                 "out-of-range --set value",
                 DAM.to_string(),
-                LineOf("end_time:"),
+                Nowhere,
                 Is("end_time"),
-                &["-1 is out of range"],
+                &["--set end_time=-1: ", "-1 is out of range"],
+            )
+        },
+        Case {
+            // A stage's range check points at the end of the stage's parentheses,
+            // outside the override's text: told as the override's by the field.
+            overrides: &["pipeline.integrate.courant=2"],
+            ..case(
+                "out-of-range --set stage parameter",
+                DAM.to_string(),
+                Nowhere,
+                Is("courant"),
+                &["--set pipeline.integrate.courant=2: ", "2 is out of range"],
+            )
+        },
+        Case {
+            overrides: &["pipeline.integrate=Integrate(courant: 2)"],
+            ..case(
+                "out-of-range --set stage",
+                DAM.to_string(),
+                Nowhere,
+                Is("courant"),
+                &["--set pipeline.integrate=Integrate(courant: 2): ", "2 is out of range"],
+            )
+        },
+        Case {
+            // A term's check names the field `terms` and the term's own field.
+            overrides: &["pipeline.forces.terms.artificial_viscosity.beta=-2"],
+            ..case(
+                "out-of-range --set term parameter",
+                DAM.to_string(),
+                Nowhere,
+                Is("terms"),
+                &[
+                    "--set pipeline.forces.terms.artificial_viscosity.beta=-2: ",
+                    "`beta` = -2 is out of range",
+                ],
+            )
+        },
+        Case {
+            overrides: &["resolution=ParticlesAcross(-100)"],
+            ..case(
+                "out-of-range --set resolution",
+                DAM.to_string(),
+                Nowhere,
+                Is("resolution"),
+                &[
+                    "--set resolution=ParticlesAcross(-100): ",
+                    "ParticlesAcross(-100) is out of range",
+                    "e.g. ParticlesAcross(40)",
+                ],
+            )
+        },
+        Case {
+            // An error in the file itself, after an override on another field: still
+            // the file's, at its place in the file (not told as the override's).
+            overrides: &["pipeline.forces.terms.artificial_viscosity.alpha=0.1"],
+            ..case(
+                "file error beside an override",
+                dam_stage(
+                    "Forces",
+                    "Forces(terms: [ArtificialViscosity(alpha: 0.03, beta: -1.0)])",
+                ),
+                LineOf("Forces(terms"),
+                AbsentOr(&["terms"]),
+                &["`beta` = -1 is out of range"],
             )
         },
         case(
@@ -681,4 +808,59 @@ fn malformed_scenarios_give_located_errors() {
         failures.len(),
         failures.join("\n")
     );
+}
+
+/// An error in the file on the line an override patched keeps the file's line and
+/// column: the override's text is taken back out of the position.
+#[test]
+fn file_errors_beside_overrides_keep_their_place_in_the_file() {
+    let registry = sph_stages::standard_registry();
+    let text = DAM.replacen(
+        "Reinitialise(every: 1",
+        "Reinitialise(every: 1, bogus: 2",
+        1,
+    );
+    assert_ne!(text, DAM, "dam_break.ron has `Reinitialise(every: 1`");
+    let load = |sets: &[&str]| {
+        let overrides: Vec<Override> = sets.iter().map(|s| s.parse().unwrap()).collect();
+        Scenario::from_str(&text, "dam.ron", &overrides, &registry).expect_err("bogus field")
+    };
+    let plain = load(&[]);
+    assert!(plain.line > 0 && plain.set.is_none(), "{plain}");
+    for sets in [
+        &["pipeline.reinitialise.every=100000"][..],
+        &[
+            "pipeline.reinitialise.filter=Shepard",
+            "end_time=2.000000000",
+        ],
+        &["pipeline.0=GhostWalls(slip: FreeSlip, hydrostatic: true)"],
+    ] {
+        let e = load(sets);
+        assert_eq!(
+            (e.line, e.column, e.set.as_deref()),
+            (plain.line, plain.column, None),
+            "with --set {sets:?}: {e}"
+        );
+        assert!(e.message.contains("`bogus`"), "{e}");
+    }
+}
+
+/// The example in the message for a malformed `--set` names a real stage and field:
+/// it applies to the shipped dam break and loads.
+#[test]
+fn set_usage_example_applies_to_a_shipped_scenario() {
+    let e = "pipeline".parse::<Override>().unwrap_err().to_string();
+    assert!(
+        e.starts_with("--set pipeline: expected `path=value`"),
+        "{e}"
+    );
+    let examples: Vec<&str> = e.split('`').skip(1).step_by(2).skip(1).collect();
+    assert!(examples.contains(&"pipeline.reinitialise.every=5"), "{e}");
+    let registry = sph_stages::standard_registry();
+    for example in examples {
+        let ov: Override = example.parse().unwrap();
+        if let Err(e) = Scenario::from_str(DAM, "dam_break.ron", &[ov], &registry) {
+            panic!("the example `{example}` does not load: {e}");
+        }
+    }
 }

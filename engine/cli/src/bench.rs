@@ -63,7 +63,8 @@ pub struct BenchArgs {
     #[arg(long, value_delimiter = ',', default_value = "5k,20k,80k,320k,1.28M")]
     pub sizes: Vec<String>,
     /// Worker-thread counts.
-    #[arg(long, value_delimiter = ',', default_value = "1,2")]
+    #[arg(long, value_delimiter = ',', default_value = "1,2", allow_negative_numbers = true,
+          value_parser = crate::count("--threads"))]
     pub threads: Vec<usize>,
     /// Steps per fixed-step run. 400, so the first steps (the neighbour lists and
     /// buffers reaching their size, first touch of new memory) weigh little: at 80k on

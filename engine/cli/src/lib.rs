@@ -48,14 +48,14 @@ pub struct ResumeArgs {
     /// The run's output folder (holding checkpoint.bin).
     pub dir: PathBuf,
     /// Worker threads [default: one per core]; results do not depend on it.
-    #[arg(long)]
+    #[arg(long, value_name = "N", allow_negative_numbers = true, value_parser = count("--threads"))]
     pub threads: Option<usize>,
     #[command(flatten)]
     pub checkpoints: CheckpointArgs,
     /// Print the per-stage time table at the end.
     #[arg(long)]
     pub profile: bool,
-    /// No progress bar.
+    /// No progress (a bar on a terminal, else a line every 5 s).
     #[arg(long, short)]
     pub quiet: bool,
 }
@@ -65,11 +65,13 @@ pub struct ResumeArgs {
 pub struct CheckpointArgs {
     /// Write a checkpoint about every SECONDS of simulated time (checkpoint.bin in the
     /// output folder, the previous one kept as checkpoint.prev.bin).
-    #[arg(long, value_name = "SECONDS")]
+    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true,
+          value_parser = seconds("--checkpoint-every"))]
     pub checkpoint_every: Option<f64>,
     /// Stop once the simulated time reaches SECONDS, with a checkpoint
     /// (continue with `engine resume DIR`).
-    #[arg(long, value_name = "SECONDS")]
+    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true,
+          value_parser = seconds("--stop-at"))]
     pub stop_at: Option<f64>,
 }
 
@@ -85,7 +87,7 @@ pub struct RunArgs {
     #[arg(long = "set", value_name = "PATH=VALUE")]
     pub sets: Vec<String>,
     /// Worker threads [default: one per core].
-    #[arg(long)]
+    #[arg(long, value_name = "N", allow_negative_numbers = true, value_parser = count("--threads"))]
     pub threads: Option<usize>,
     /// Print the per-stage time table at the end (stages and their inner spans).
     #[arg(long)]
@@ -93,7 +95,7 @@ pub struct RunArgs {
     /// Write a Chrome/Perfetto trace of the step, stage and inner spans to FILE.
     #[arg(long, value_name = "FILE")]
     pub trace: Option<PathBuf>,
-    /// No progress bar.
+    /// No progress (a bar on a terminal, else a line every 5 s).
     #[arg(long, short)]
     pub quiet: bool,
     #[command(flatten)]
@@ -153,6 +155,34 @@ fn interrupt_flag() -> Option<Arc<AtomicBool>> {
     .clone()
 }
 
+/// The parser of a count option (`--threads`, `--workers`): a whole number >= 1, with
+/// an error that names the option and what it takes. Used with
+/// `allow_negative_numbers`, so that `--threads -1` reaches it instead of clap's
+/// "unexpected argument '-1'".
+pub fn count(
+    option: &'static str,
+) -> impl Fn(&str) -> Result<usize, String> + Clone + Send + Sync + 'static {
+    move |text| match text.trim().parse::<usize>() {
+        Ok(n) if n >= 1 => Ok(n),
+        _ => Err(format!(
+            "{option} takes a positive whole number, e.g. {option} 2"
+        )),
+    }
+}
+
+/// The parser of a time option (`--stop-at`, `--checkpoint-every`): seconds of
+/// simulated time > 0, with an error that names the option.
+pub fn seconds(
+    option: &'static str,
+) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync + 'static {
+    move |text| match text.trim().parse::<f64>() {
+        Ok(t) if t > 0.0 && t.is_finite() => Ok(t),
+        _ => Err(format!(
+            "{option} takes seconds of simulated time > 0, e.g. {option} 2.5"
+        )),
+    }
+}
+
 /// The `--set PATH=VALUE` arguments as overrides.
 pub fn parse_sets(sets: &[String]) -> Result<Vec<Override>, String> {
     sets.iter()
@@ -164,6 +194,16 @@ pub fn parse_sets(sets: &[String]) -> Result<Vec<Override>, String> {
 pub fn resume(args: &ResumeArgs, registry: &StageRegistry) -> Result<ExitCode, String> {
     if args.threads == Some(0) {
         return Err("--threads must be at least 1".into());
+    }
+    if !args.dir.is_dir() {
+        let what = match args.dir.exists() {
+            true => "not a folder",
+            false => "no such folder",
+        };
+        return Err(format!(
+            "{}: {what} (expected a run's output folder holding checkpoint.bin, written with --checkpoint-every, --stop-at or at Ctrl-C)",
+            args.dir.display()
+        ));
     }
     let (checkpoint, notes) = sph_core::checkpoint::read_latest(&args.dir)?;
     for note in notes {

@@ -16,10 +16,10 @@ pub struct StudyArgs {
     #[arg(long = "set", value_name = "PATH=VALUE")]
     pub sets: Vec<String>,
     /// Cases run at the same time [default: one per core, at most one per case].
-    #[arg(long, conflicts_with = "submit")]
+    #[arg(long, conflicts_with = "submit", allow_negative_numbers = true, value_parser = crate::count("--workers"))]
     pub workers: Option<usize>,
     /// Threads per case [default: the cores left per worker, at least 1].
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = crate::count("--threads"))]
     pub threads: Option<usize>,
     /// Run nothing: write study.csv, report.md and the figures from the cases that
     /// have finished (the others are rows `not run`), e.g. while a long study runs.

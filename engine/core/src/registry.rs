@@ -155,17 +155,30 @@ impl StageRegistry {
     pub fn unknown_message(&self, written: &str) -> String {
         let snake = snake_case(written);
         let known: Vec<String> = self.entries.keys().map(|k| camel_case(k)).collect();
-        let nearest = self
-            .entries
-            .keys()
-            .min_by_key(|k| strsim::levenshtein(k, &snake))
-            .map(|k| format!(" (nearest: `{}`)", camel_case(k)))
+        let nearest = did_you_mean(&snake, self.entries.keys().map(String::as_str))
+            .map(|k| format!(" did you mean `{}`?", camel_case(k)))
             .unwrap_or_default();
         format!(
-            "unknown stage `{written}`{nearest}; known stages: {}",
+            "unknown stage `{written}`;{nearest} known stages: {}",
             known.join(", ")
         )
     }
+}
+
+/// The name of `names` nearest to a misspelt `written` one (edit distance), if it is
+/// close enough to offer as "did you mean": within a third of `written`'s length, at
+/// least 2 edits. Ties go to the first name.
+pub fn did_you_mean<'a>(
+    written: &str,
+    names: impl IntoIterator<Item = &'a str>,
+) -> Option<&'a str> {
+    let limit = (written.chars().count() / 3).max(2);
+    names
+        .into_iter()
+        .map(|n| (strsim::levenshtein(written, n), n))
+        .filter(|&(d, _)| d <= limit)
+        .min_by_key(|&(d, _)| d)
+        .map(|(_, n)| n)
 }
 
 /// `NeighbourGrid` -> `neighbour_grid`, `EOSForce` -> `eos_force` (a run of capitals

@@ -25,7 +25,8 @@ pub struct RunOptions {
     pub out_dir: PathBuf,
     /// Worker threads (default: rayon's, i.e. one per core).
     pub threads: Option<usize>,
-    /// Show a progress bar on a terminal.
+    /// Show progress on stderr: a bar on a terminal, else a line every few seconds
+    /// ([`PROGRESS_SECONDS_VAR`]).
     pub progress: bool,
     /// Time the spans: `summary.json`'s `stages` and [`Summary::profile_table`]. Off,
     /// no subscriber is installed and the spans cost next to nothing.
@@ -301,7 +302,7 @@ fn run_in_pool(
     let mut next_checkpoint = opts
         .checkpoint_every
         .map(|every| every * ((sim.clock.time / every).floor() + 1.0));
-    let progress = progress_bar(opts.progress, sim.clock.end_time);
+    let mut progress = Progress::new(opts.progress, &sim);
     let start = Instant::now();
     let mut failure = None;
     let mut paused = None;
@@ -342,8 +343,7 @@ fn run_in_pool(
         ghost_sum += count::<Ghost>(&sim.world) as f64;
         if step.is_multiple_of(20) {
             let steps = sim.clock.step - start_step;
-            update_progress(
-                &progress,
+            progress.update(
                 &sim,
                 summary.fluid_particles * steps as usize,
                 start.elapsed(),
@@ -390,7 +390,7 @@ fn run_in_pool(
     summary.particle_steps_per_second = summary.fluid_particles as f64
         * (summary.steps - start_step) as f64
         / summary.wall_seconds.max(1e-9);
-    progress.finish_and_clear();
+    progress.finish();
     summary.diagnostics = sim.diagnostics.clone();
 
     if let Some((_, step, error)) = &failure {
@@ -615,26 +615,111 @@ fn restore(
     d.end()
 }
 
-fn progress_bar(show: bool, end_time: f64) -> ProgressBar {
-    if !show {
-        return ProgressBar::hidden();
-    }
-    let bar = ProgressBar::with_draw_target(
-        Some((end_time * 1e4).ceil() as u64),
-        ProgressDrawTarget::stderr(),
-    );
-    if let Ok(style) = ProgressStyle::with_template("{bar:40} t = {msg} ETA {eta}") {
-        bar.set_style(style);
-    }
-    bar
+/// How often a progress line is printed when stderr is not a terminal: every 5 s of
+/// wall time, or every `SPH_PROGRESS_SECONDS` (a number of seconds >= 0; 0 prints one
+/// at every update, every 20 steps).
+pub const PROGRESS_SECONDS_VAR: &str = "SPH_PROGRESS_SECONDS";
+
+/// The run's progress on stderr: a bar on a terminal; a plain line every few seconds
+/// when stderr goes to a file or a pipe (a batch job's log), where a bar would show
+/// nothing until the end; nothing when not wanted.
+enum Progress {
+    Hidden,
+    Bar(ProgressBar),
+    Lines {
+        every: Duration,
+        /// When the last line was printed (the run's start before the first).
+        last: Instant,
+        /// The simulated time this session started from (a resume's checkpoint time).
+        from: f64,
+    },
 }
 
-/// `particle_steps`: particle-steps done by this session (not before a resume).
-fn update_progress(bar: &ProgressBar, sim: &Sim, particle_steps: usize, elapsed: Duration) {
-    bar.set_position((sim.clock.time * 1e4) as u64);
-    let rate = particle_steps as f64 / elapsed.as_secs_f64().max(1e-9);
-    bar.set_message(format!(
-        "{:.3} / {:.3} s, step {}, dt {:.2e} s, {:.2e} particle-steps/s",
-        sim.clock.time, sim.clock.end_time, sim.clock.step, sim.clock.dt, rate
-    ));
+impl Progress {
+    fn new(show: bool, sim: &Sim) -> Self {
+        use std::io::IsTerminal;
+        if !show {
+            return Self::Hidden;
+        }
+        if !std::io::stderr().is_terminal() {
+            return Self::Lines {
+                every: line_interval(),
+                last: Instant::now(),
+                from: sim.clock.time,
+            };
+        }
+        let bar = ProgressBar::with_draw_target(
+            Some((sim.clock.end_time * 1e4).ceil() as u64),
+            ProgressDrawTarget::stderr(),
+        );
+        if let Ok(style) = ProgressStyle::with_template("{bar:40} t = {msg} ETA {eta}") {
+            bar.set_style(style);
+        }
+        Self::Bar(bar)
+    }
+
+    /// `particle_steps`: particle-steps done by this session (not before a resume).
+    fn update(&mut self, sim: &Sim, particle_steps: usize, elapsed: Duration) {
+        let c = &sim.clock;
+        let rate = particle_steps as f64 / elapsed.as_secs_f64().max(1e-9);
+        match self {
+            Self::Hidden => {}
+            Self::Bar(bar) => {
+                bar.set_position((c.time * 1e4) as u64);
+                bar.set_message(format!(
+                    "{:.3} / {:.3} s, step {}, dt {:.2e} s, {:.2e} particle-steps/s",
+                    c.time, c.end_time, c.step, c.dt, rate
+                ));
+            }
+            Self::Lines { every, last, from } => {
+                if last.elapsed() < *every {
+                    return;
+                }
+                *last = Instant::now();
+                // Simulated time advances at a roughly steady rate once the flow is
+                // going: the ETA extrapolates this session's.
+                let done = c.time - *from;
+                let eta = match done > 0.0 {
+                    true => format!(
+                        "{:.0} s",
+                        (c.end_time - c.time).max(0.0) * elapsed.as_secs_f64() / done
+                    ),
+                    false => "unknown".into(),
+                };
+                eprintln!(
+                    "progress: t = {:.3} / {:.3} s ({:.0} %), step {}, dt {:.2e} s, {:.2e} particle-steps/s, {:.0} s elapsed, ETA {eta}",
+                    c.time,
+                    c.end_time,
+                    100.0 * c.time / c.end_time.max(1e-300),
+                    c.step,
+                    c.dt,
+                    rate,
+                    elapsed.as_secs_f64()
+                );
+            }
+        }
+    }
+
+    fn finish(&self) {
+        if let Self::Bar(bar) = self {
+            bar.finish_and_clear();
+        }
+    }
+}
+
+/// The interval between progress lines: [`PROGRESS_SECONDS_VAR`] or 5 s.
+fn line_interval() -> Duration {
+    let default = Duration::from_secs(5);
+    let Ok(text) = std::env::var(PROGRESS_SECONDS_VAR) else {
+        return default;
+    };
+    match text.trim().parse::<f64>() {
+        Ok(s) if s >= 0.0 && s.is_finite() => Duration::from_secs_f64(s.min(1e9)),
+        _ => {
+            eprintln!(
+                "warning: {PROGRESS_SECONDS_VAR}={text:?} is not a number of seconds >= 0; printing progress every 5 s"
+            );
+            default
+        }
+    }
 }

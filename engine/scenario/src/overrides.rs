@@ -2,10 +2,12 @@
 //!
 //! Patching the text (rather than a parsed value tree) keeps the loader's line:column error
 //! positions meaningful and preserves the names of enum-like pipeline entries such as
-//! `Density(every: 5)`, which a generic RON value tree would drop.
+//! `Reinitialise(every: 5)`, which a generic RON value tree would drop. Each patch's
+//! place in the patched text is kept ([`Patch`]), so the loader can name the `--set`
+//! argument an error comes from instead of a place in the file.
 
 use crate::lexer::{lex, Shape, SyntaxError, Tok, Token};
-use sph_core::registry::snake_case;
+use sph_core::registry::{did_you_mean, snake_case};
 use std::ops::Range;
 use std::str::FromStr;
 
@@ -50,7 +52,9 @@ impl FromStr for Override {
         let Some((path, value)) = raw.split_once('=') else {
             return Err(OverrideError::Syntax {
                 raw: raw.to_owned(),
-                reason: "expected `path=value`, e.g. `pipeline.density.every=5`".to_owned(),
+                reason:
+                    "expected `path=value`, e.g. `end_time=0.5` or `pipeline.reinitialise.every=5`"
+                        .to_owned(),
             });
         };
         let parsed = Self {
@@ -84,20 +88,112 @@ impl Override {
     }
 }
 
+/// Where one override landed in the patched text (byte ranges of the final text).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Patch {
+    /// The `--set` argument as given.
+    pub raw: String,
+    /// The text the override wrote: the new value, or `name: value, ` when inserted.
+    pub span: Range<usize>,
+    /// Each segment of the path that is not a list index, with the struct, list or map
+    /// that holds it: for `pipeline.integrate.courant`, `pipeline` in the scenario,
+    /// `integrate` in the list, `courant` in `Integrate(...)`.
+    pub holders: Vec<(String, Range<usize>)>,
+    /// The length of the text it replaced (0 when inserted); for a patch that no
+    /// other patch holds, text of the file.
+    pub replaced: usize,
+}
+
+impl Patch {
+    /// The field (or element) the override sets: its last segment that is not a list
+    /// index, e.g. `courant`, or `gravity` for `gravity.1`.
+    pub fn field(&self) -> Option<&str> {
+        self.holders.last().map(|(s, _)| s.as_str())
+    }
+}
+
+/// The offset in the file of `offset` in the patched text, when that lies outside
+/// every patch: moved back by what the patches before it added or removed.
+pub fn source_offset(offset: usize, patches: &[Patch]) -> usize {
+    let outermost = patches.iter().filter(|p| {
+        !patches
+            .iter()
+            .any(|q| q.span != p.span && q.span.start <= p.span.start && p.span.end <= q.span.end)
+    });
+    let before = outermost.filter(|p| p.span.end <= offset);
+    let (added, removed) = before.fold((0, 0), |(a, r), p| (a + p.span.len(), r + p.replaced));
+    (offset + removed).saturating_sub(added)
+}
+
+/// `r` after an edit that replaced the text at `edit` by `len` bytes: unchanged before
+/// it, moved after it, grown around it; `None` when the edit overwrote (part of) it.
+fn shifted(r: &Range<usize>, edit: &Range<usize>, len: usize) -> Option<Range<usize>> {
+    if r.end <= edit.start {
+        Some(r.clone())
+    } else if r.start >= edit.end {
+        Some(r.start - edit.len() + len..r.end - edit.len() + len)
+    } else if edit.start <= r.start && r.end <= edit.end {
+        None
+    } else if r.start <= edit.start && edit.end <= r.end {
+        Some(r.start..r.end - edit.len() + len)
+    } else {
+        None
+    }
+}
+
 /// Applies overrides in order; returns the patched RON text.
 pub fn apply_overrides(source: &str, overrides: &[Override]) -> Result<String, OverrideError> {
+    apply_overrides_traced(source, overrides).map(|(text, _)| text)
+}
+
+/// As [`apply_overrides`], with where each override landed in the patched text (the
+/// ones a later override overwrote left out).
+pub fn apply_overrides_traced(
+    source: &str,
+    overrides: &[Override],
+) -> Result<(String, Vec<Patch>), OverrideError> {
     let mut text = source.to_owned();
+    let mut patches: Vec<Patch> = Vec::new();
     for ov in overrides {
         ov.check()?;
         let root = document(&text).map_err(|e| e.locate(&text, &ov.raw))?;
-        let (range, replacement) =
+        let (range, replacement, holders) =
             resolve(&text, &root, ov).map_err(|reason| OverrideError::Path {
                 raw: ov.raw.clone(),
                 reason,
             })?;
-        text.replace_range(range, &replacement);
+        let len = replacement.len();
+        text.replace_range(range.clone(), &replacement);
+        patches.retain_mut(|p| {
+            let Some(span) = shifted(&p.span, &range, len) else {
+                return false;
+            };
+            p.span = span;
+            p.holders
+                .iter_mut()
+                .all(|(_, r)| shifted(r, &range, len).map(|s| *r = s).is_some())
+        });
+        let span = range.start..range.start + len;
+        let holders = ov
+            .path
+            .iter()
+            .zip(holders)
+            .filter(|(seg, _)| seg.parse::<usize>().is_err())
+            .map(|(seg, r)| {
+                (
+                    seg.clone(),
+                    shifted(&r, &range, len).unwrap_or(span.clone()),
+                )
+            })
+            .collect();
+        patches.push(Patch {
+            raw: ov.raw.clone(),
+            span,
+            holders,
+            replaced: range.len(),
+        });
     }
-    Ok(text)
+    Ok((text, patches))
 }
 
 impl Shape {
@@ -229,13 +325,9 @@ impl<'a> Body<'a> {
                 if labels.is_empty() {
                     return format!("no {item} `{seg}` in {here}, which is empty");
                 }
-                let nearest = labels
-                    .iter()
-                    .filter(|l| l.parse::<usize>().is_err())
-                    .map(|l| (strsim::levenshtein(seg, l), l))
-                    .min()
-                    .filter(|&(d, _)| d <= (seg.chars().count() / 3).max(2))
-                    .map(|(_, l)| format!(" (nearest: {l})"))
+                let names = labels.iter().filter(|l| l.parse::<usize>().is_err());
+                let nearest = did_you_mean(seg, names.map(String::as_str))
+                    .map(|l| format!("; did you mean `{l}`?"))
                     .unwrap_or_default();
                 format!(
                     "no {item} `{seg}` in {here}; {item}s are: {}{nearest}",
@@ -424,19 +516,29 @@ fn single_value(text: &str) -> Result<(), SyntaxError> {
     }
 }
 
-/// Finds the text range an override replaces and its replacement.
-fn resolve(src: &str, root: &Node<'_>, ov: &Override) -> Result<(Range<usize>, String), String> {
+/// What an override does to the text: the range it replaces, the replacement and, for
+/// each path segment, the range of the struct, list or map that holds it.
+type Edit = (Range<usize>, String, Vec<Range<usize>>);
+
+/// Finds the [`Edit`] of an override.
+fn resolve(src: &str, root: &Node<'_>, ov: &Override) -> Result<Edit, String> {
     let value = &ov.value;
     let mut node = root;
+    let mut holders = Vec::new();
     for (i, seg) in ov.path.iter().enumerate() {
         let here = match i {
             0 => "the scenario".to_owned(),
             _ => format!("`{}`", ov.path[..i].join(".")),
         };
         let last = i + 1 == ov.path.len();
+        holders.push(node.span.clone());
         let Some(body) = &node.body else {
             return match node.name {
-                Some(name) if last => Ok((node.span.clone(), format!("{name}({seg}: {value})"))),
+                Some(name) if last => Ok((
+                    node.span.clone(),
+                    format!("{name}({seg}: {value})"),
+                    holders,
+                )),
                 _ => Err(format!(
                     "{here} is `{}`, not a struct, list or map, so it has no `{seg}`",
                     &src[node.span.clone()]
@@ -444,7 +546,7 @@ fn resolve(src: &str, root: &Node<'_>, ov: &Override) -> Result<(Range<usize>, S
             };
         };
         match body.select(seg) {
-            Ok(child) if last => return Ok((child.span.clone(), value.clone())),
+            Ok(child) if last => return Ok((child.span.clone(), value.clone(), holders)),
             Ok(child) => node = child,
             Err(Miss::Absent)
                 if last
@@ -455,7 +557,7 @@ fn resolve(src: &str, root: &Node<'_>, ov: &Override) -> Result<(Range<usize>, S
                     Shape::Map => format!("{seg:?}"),
                     _ => seg.clone(),
                 };
-                return Ok((body.open..body.open, format!("{key}: {value}, ")));
+                return Ok((body.open..body.open, format!("{key}: {value}, "), holders));
             }
             Err(miss) => return Err(body.explain(miss, &here, ov, i)),
         }
@@ -606,18 +708,20 @@ Scenario(
         assert_eq!(
             e,
             "--set pipeline.reinitialize.every=5: no element `reinitialize` in `pipeline`; elements are: \
-             neighbour_grid, ghost_walls, density, eos, forces, integrate, reinitialise, probe \
-             (nearest: reinitialise)"
+             neighbour_grid, ghost_walls, density, eos, forces, integrate, reinitialise, probe; \
+             did you mean `reinitialise`?"
         );
         let e = error(SAMPLE, &["pipelin.density.every=5"]);
         assert!(
             e.contains("no field `pipelin` in the scenario; fields are: name, dt,"),
             "{e}"
         );
-        assert!(e.contains("(nearest: pipeline)"), "{e}");
+        assert!(e.contains("; did you mean `pipeline`?"), "{e}");
         let e = error(SAMPLE, &["pipeline.eos.gama.x=1"]);
         assert!(
-            e.contains("no field `gama` in `pipeline.eos`; fields are: gamma, c0 (nearest: gamma)"),
+            e.contains(
+                "no field `gama` in `pipeline.eos`; fields are: gamma, c0; did you mean `gamma`?"
+            ),
             "{e}"
         );
         let e = error(SAMPLE, &["pipeline.9.every=1"]);
@@ -629,6 +733,82 @@ Scenario(
         assert!(e.contains("`dt` is `1e-4`, not a struct"), "{e}");
         let e = error(SAMPLE, &["gravity.z=1"]);
         assert!(e.contains("fields are: 0, 1"), "{e}");
+    }
+
+    #[test]
+    fn patches_record_where_each_override_landed() {
+        let args: Vec<Override> = [
+            "pipeline.reinitialise.every=5",
+            "pipeline.eos.b=3",
+            "dt=2.5e-5",
+            "pipeline.integrate.scheme=Euler",
+        ]
+        .iter()
+        .map(|a| a.parse().unwrap())
+        .collect();
+        let (text, patches) = apply_overrides_traced(SAMPLE, &args).unwrap();
+        let written: Vec<&str> = patches.iter().map(|p| &text[p.span.clone()]).collect();
+        assert_eq!(
+            written,
+            ["5", "b: 3, ", "2.5e-5", "Integrate(scheme: Euler)"]
+        );
+        let eos = &patches[1];
+        assert_eq!(eos.field(), Some("b"));
+        let holders: Vec<(&str, &str)> = eos
+            .holders
+            .iter()
+            .map(|(s, r)| (s.as_str(), &text[r.clone()]))
+            .collect();
+        assert_eq!(holders[1].0, "eos");
+        assert!(
+            holders[1].1.starts_with("[\n        NeighbourGrid"),
+            "{holders:?}"
+        );
+        assert_eq!(holders[2], ("b", "Eos(b: 3, gamma: 7.0, c0: 20.0)"));
+        // Text outside the patches maps back to the file: `gamma` after the insertion.
+        let gamma = text.find("gamma: 7.0").unwrap();
+        assert_eq!(
+            source_offset(gamma, &patches),
+            SAMPLE.find("gamma: 7.0").unwrap()
+        );
+        let probe = text.find("Probe(").unwrap();
+        assert_eq!(
+            source_offset(probe, &patches),
+            SAMPLE.find("Probe(").unwrap()
+        );
+    }
+
+    #[test]
+    fn overwritten_patches_are_dropped_and_holders_grow() {
+        let args: Vec<Override> = [
+            "pipeline.eos.gamma=1.4",
+            "pipeline.eos=Eos(c0: 30.0)",
+            "pipeline.eos.c0=40.0",
+            "gravity.1=-1.62",
+        ]
+        .iter()
+        .map(|a| a.parse().unwrap())
+        .collect();
+        let (text, patches) = apply_overrides_traced(SAMPLE, &args).unwrap();
+        let written: Vec<(&str, &str)> = patches
+            .iter()
+            .map(|p| (p.raw.as_str(), &text[p.span.clone()]))
+            .collect();
+        // The first is overwritten by the second; the third lies inside the second.
+        assert_eq!(
+            written,
+            [
+                ("pipeline.eos=Eos(c0: 30.0)", "Eos(c0: 40.0)"),
+                ("pipeline.eos.c0=40.0", "40.0"),
+                ("gravity.1=-1.62", "-1.62"),
+            ]
+        );
+        assert_eq!(patches[2].field(), Some("gravity"));
+        let forces = text.find("Forces(").unwrap();
+        assert_eq!(
+            source_offset(forces, &patches),
+            SAMPLE.find("Forces(").unwrap()
+        );
     }
 
     #[test]
@@ -714,7 +894,14 @@ Scenario(
                     }
                 }
             }
-            let _ = apply_overrides(&text, &args[rand(args.len())..]);
+            if let Ok((out, patches)) = apply_overrides_traced(&text, &args[rand(args.len())..]) {
+                for p in &patches {
+                    assert!(out.get(p.span.clone()).is_some(), "{p:?} in {out:?}");
+                    for (_, r) in &p.holders {
+                        assert!(r.start <= p.span.start && p.span.end <= r.end, "{p:?}");
+                    }
+                }
+            }
         }
     }
 }

@@ -7,7 +7,7 @@
 //! `file:line:column`, the field and what would be accepted.
 
 use crate::lexer::{lex_lenient, Shape, Tok, Token};
-use crate::overrides::{apply_overrides, Override};
+use crate::overrides::{apply_overrides_traced, source_offset, Override, Patch};
 use glam::DVec2;
 use serde::de::{
     self, DeserializeSeed, Deserializer, EnumAccess, MapAccess, VariantAccess, Visitor,
@@ -20,7 +20,7 @@ use sph_core::kernel::KernelKind;
 use sph_core::motion::{Motion, MotionSeries, MotionSpec, Pose};
 use sph_core::piston::{Piston, PistonSpec, PISTON_WALL};
 use sph_core::registry::ron_options;
-use sph_core::registry::{camel_case, snake_case, StageRegistry};
+use sph_core::registry::{camel_case, did_you_mean, snake_case, StageRegistry};
 use sph_core::sim::{Clock, Constants, Resources, Sim, Tait};
 use sph_core::stage::Stage;
 use sph_core::units::Positive;
@@ -81,7 +81,53 @@ pub enum Resolution {
     /// Particle spacing ds [m].
     Spacing(Positive),
     /// Number of particles across the width of the first fluid block.
-    ParticlesAcross(u32),
+    ParticlesAcross(#[serde(deserialize_with = "particles_across")] u32),
+}
+
+/// What `ParticlesAcross` accepts, for its errors.
+const PARTICLES_ACROSS: &str =
+    "a whole number of particles across the first fluid block, 2 or more, e.g. ParticlesAcross(40)";
+
+/// `ParticlesAcross(n)`'s number: a whole number from 2 to `u32::MAX`, with an error
+/// that says so for anything else (-100, 40.5, "40") instead of serde's bare "Integer
+/// is out of bounds".
+fn particles_across<'de, D: Deserializer<'de>>(d: D) -> Result<u32, D::Error> {
+    fn out_of_range<E: de::Error>(n: impl fmt::Display) -> E {
+        E::custom(format!(
+            "ParticlesAcross({n}) is out of range; ParticlesAcross takes {PARTICLES_ACROSS}"
+        ))
+    }
+    struct Count;
+    impl Visitor<'_> for Count {
+        type Value = u32;
+        fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+            write!(f, "{PARTICLES_ACROSS}")
+        }
+        fn visit_u64<E: de::Error>(self, n: u64) -> Result<u32, E> {
+            self.visit_u128(n.into())
+        }
+        fn visit_i64<E: de::Error>(self, n: i64) -> Result<u32, E> {
+            self.visit_i128(n.into())
+        }
+        fn visit_u128<E: de::Error>(self, n: u128) -> Result<u32, E> {
+            u32::try_from(n)
+                .ok()
+                .filter(|&n| n >= 2)
+                .ok_or_else(|| out_of_range(n))
+        }
+        fn visit_i128<E: de::Error>(self, n: i128) -> Result<u32, E> {
+            u128::try_from(n).map_or_else(|_| Err(out_of_range(n)), |n| self.visit_u128(n))
+        }
+        fn visit_f64<E: de::Error>(self, x: f64) -> Result<u32, E> {
+            if x.fract() == 0.0 {
+                return Err(out_of_range(x));
+            }
+            Err(E::custom(format!(
+                "ParticlesAcross({x}) is not a whole number; ParticlesAcross takes {PARTICLES_ACROSS}"
+            )))
+        }
+    }
+    d.deserialize_any(Count)
 }
 
 /// An axis-aligned tank with its bottom-left inner corner at the origin; generates the
@@ -414,6 +460,9 @@ pub struct LoadError {
     /// 1-based; 0 when the error is not tied to a place in the file.
     pub line: usize,
     pub column: usize,
+    /// The `--set` argument the error comes from (then line and column are 0): it wrote
+    /// the offending text, or set the field the error names.
+    pub set: Option<String>,
     pub field: Option<String>,
     pub message: String,
 }
@@ -425,6 +474,9 @@ impl fmt::Display for LoadError {
             write!(f, ":{}:{}", self.line, self.column)?;
         }
         write!(f, ": ")?;
+        if let Some(set) = &self.set {
+            write!(f, "--set {set}: ")?;
+        }
         if let Some(field) = &self.field {
             write!(f, "field `{field}`: ")?;
         }
@@ -455,7 +507,7 @@ pub struct Scenario {
 /// A RON parse error as a [`LoadError`]: `file:line:column`, the field it is about.
 fn parse_error(doc: &Doc, file: &str, e: &ron::error::SpannedError) -> LoadError {
     let (line, column) = (e.span.start.line, e.span.start.col);
-    let message = e.code.to_string();
+    let message = did_you_mean_in(e.code.to_string());
     let (field, message) = if matches!(e.code, ron::Error::Eof) {
         // Input ended early: about the unclosed whole, not the last field.
         (None, message)
@@ -466,6 +518,7 @@ fn parse_error(doc: &Doc, file: &str, e: &ron::error::SpannedError) -> LoadError
         file: file.to_string(),
         line,
         column,
+        set: None,
         field,
         message,
     }
@@ -491,6 +544,7 @@ impl Scenario {
             file: file.clone(),
             line: 0,
             column: 0,
+            set: None,
             field: None,
             message: format!("cannot read the scenario file: {e}"),
         })?;
@@ -504,20 +558,24 @@ impl Scenario {
         overrides: &[Override],
         registry: &StageRegistry,
     ) -> Result<Self, LoadError> {
-        let text = apply_overrides(text, overrides).map_err(|e| LoadError {
-            file: file.to_string(),
-            line: 0,
-            column: 0,
-            field: None,
-            message: e.to_string(),
-        })?;
+        let (patched, patches) =
+            apply_overrides_traced(text, overrides).map_err(|e| LoadError {
+                file: file.to_string(),
+                line: 0,
+                column: 0,
+                set: None,
+                field: None,
+                message: e.to_string(),
+            })?;
         REGISTRY.with(|r| *r.borrow_mut() = Some(registry.clone()));
-        let parsed: Result<ScenarioSpec, _> = ron_options().from_str(&text);
+        let parsed: Result<ScenarioSpec, _> = ron_options().from_str(&patched);
         REGISTRY.with(|r| *r.borrow_mut() = None);
-        let doc = Doc::new(&text);
-        let spec = parsed.map_err(|e| parse_error(&doc, file, &e))?;
+        let doc = Doc::new(&patched);
         let at = Locator { file, doc: &doc };
-        validate(spec, &at, PathBuf::from(file))
+        parsed
+            .map_err(|e| parse_error(&doc, file, &e))
+            .and_then(|spec| validate(spec, &at, PathBuf::from(file)))
+            .map_err(|e| blame_override(e, &doc, &patches, text))
     }
 
     /// The scenario with every default filled in, as RON text.
@@ -1204,6 +1262,7 @@ impl Locator<'_> {
             file: self.file.to_string(),
             line,
             column,
+            set: None,
             field: Some(field.to_string()),
             message,
         }
@@ -1213,6 +1272,53 @@ impl Locator<'_> {
     fn field(&self, field: &str, message: String) -> LoadError {
         self.error(field, self.doc.key(&[field]), message)
     }
+}
+
+/// An error an override caused, told as the override's (`--set ARG: ...`, no place in
+/// the file, which does not hold that text): the newest override whose text holds the
+/// error's place; else the newest that set the field the error names, when the error
+/// points inside what holds that field (a stage's range check points at the end of the
+/// stage's parentheses) or nowhere; else the newest whose path passes through the
+/// field the error names (a term's check names `terms`), pointing inside what holds
+/// it, when the message names what the override set. Any other error's place in the
+/// patched text is moved back to its place in `source`, the file.
+fn blame_override(mut e: LoadError, doc: &Doc, patches: &[Patch], source: &str) -> LoadError {
+    let at = (e.line > 0).then(|| doc.offset(e.line, e.column));
+    let field = e.field.as_deref();
+    let inside = |r: &std::ops::Range<usize>| at.is_some_and(|o| r.start <= o && o < r.end);
+    let names = |p: &Patch| {
+        p.field().is_some_and(|f| {
+            e.message.contains(&format!("`{f}`")) || e.message.contains(&camel_case(f))
+        })
+    };
+    let sets_field = |p: &&Patch| {
+        p.holders.iter().enumerate().any(|(i, (seg, holder))| {
+            let last = i + 1 == p.holders.len();
+            field == Some(seg.as_str())
+                && (inside(holder) || (last && at.is_none()))
+                && (last || names(p))
+        })
+    };
+    let patch = patches
+        .iter()
+        .rev()
+        .find(|p| inside(&p.span))
+        .or_else(|| patches.iter().rev().find(sets_field));
+    match (patch, at) {
+        (Some(p), _) => {
+            e.set = Some(p.raw.clone());
+            (e.line, e.column) = (0, 0);
+        }
+        (None, Some(at)) if !patches.is_empty() => {
+            let offset = source_offset(at, patches).min(source.len());
+            let before = source.get(..offset).unwrap_or(source);
+            let line_start = before.rfind('\n').map_or(0, |n| n + 1);
+            e.line = before.matches('\n').count() + 1;
+            e.column = before[line_start..].chars().count() + 1;
+        }
+        _ => {}
+    }
+    e
 }
 
 /// The field a RON error is about, and its message without a duplicated field name.
@@ -1256,6 +1362,32 @@ fn unknown_field(message: &str) -> Option<String> {
     let name = &rest[..rest.find('`')?];
     let name = name.strip_prefix("r#").unwrap_or(name);
     (!name.is_empty()).then(|| name.to_string())
+}
+
+/// An unknown-name message (ron's "Unexpected field named `alfa`, expected either
+/// `alpha` or `beta` instead", "Unexpected variant named ...", serde's "unknown field
+/// `x`, expected one of ...") with the nearest expected name offered:
+/// "...; did you mean `alpha`?". Other messages, and names nowhere near any expected
+/// one, are returned unchanged.
+fn did_you_mean_in(message: String) -> String {
+    let written = unknown_field(&message).or_else(|| {
+        let rest = [
+            "Unexpected variant named `",
+            "Unexpected enum variant named `",
+            "unknown variant `",
+        ]
+        .iter()
+        .find_map(|p| message.strip_prefix(p))?;
+        Some(rest[..rest.find('`')?].to_string())
+    });
+    let (Some(written), Some(at)) = (written, message.find(", expected")) else {
+        return message;
+    };
+    let expected = message[at..].split('`').skip(1).step_by(2);
+    match did_you_mean(&written, expected.filter(|n| !n.is_empty())) {
+        Some(name) => format!("{message}; did you mean `{name}`?"),
+        None => message,
+    }
 }
 
 /// The scenario text as tokens, comments and whitespace left out, so that places in it

@@ -298,6 +298,7 @@ fn spec_error(file: &str, field: &str, message: String) -> LoadError {
         file: file.to_string(),
         line: 0,
         column: 0,
+        set: None,
         field: Some(field.to_string()),
         message,
     }
@@ -313,8 +314,10 @@ impl Study {
         registry: &StageRegistry,
     ) -> Result<Self, LoadError> {
         let file = path.display().to_string();
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| spec_error(&file, "study", format!("cannot read the study file: {e}")))?;
+        let text = std::fs::read_to_string(path).map_err(|e| LoadError {
+            field: None,
+            ..spec_error(&file, "", format!("cannot read the study file: {e}"))
+        })?;
         let spec: StudySpec = parse_ron(&text, &file)?;
         let dir = path.parent().unwrap_or(Path::new("."));
         let scenario = dir.join(&spec.scenario);

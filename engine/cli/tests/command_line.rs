@@ -1,0 +1,215 @@
+//! The `engine` command's own errors and its progress output, run as a user runs it:
+//! the binary with its stderr piped (not a terminal).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const ENGINE: &str = env!("CARGO_BIN_EXE_engine");
+
+fn shipped(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../scenarios")
+        .join(name)
+}
+
+fn temp(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("engine-cli-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+fn engine(args: &[&str], env: &[(&str, &str)]) -> Output {
+    let mut c = Command::new(ENGINE);
+    c.args(args).env_remove("SPH_PROGRESS_SECONDS");
+    for (k, v) in env {
+        c.env(k, v);
+    }
+    c.output().expect("the engine binary runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A coarse, short dam break that writes next to nothing.
+fn short_run(out: &Path) -> Vec<String> {
+    let mut args: Vec<String> = vec![
+        shipped("dam_break.ron").display().to_string(),
+        "--out".into(),
+        out.display().to_string(),
+        "--threads".into(),
+        "1".into(),
+    ];
+    for set in [
+        "resolution=ParticlesAcross(20)",
+        "end_time=0.05",
+        "pipeline.probe.plots=false",
+        "pipeline.energy.plots=false",
+        "pipeline.vtk_frames.interval=1.0",
+    ] {
+        args.push("--set".into());
+        args.push(set.into());
+    }
+    args
+}
+
+#[test]
+fn progress_is_printed_as_lines_when_stderr_is_not_a_terminal() {
+    let out = temp("progress");
+    let args = short_run(&out);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let run = engine(&args, &[("SPH_PROGRESS_SECONDS", "0")]);
+    let err = stderr(&run);
+    assert!(run.status.success(), "{err}");
+    let lines: Vec<&str> = err
+        .lines()
+        .filter(|l| l.starts_with("progress: "))
+        .collect();
+    assert!(lines.len() >= 3, "expected progress lines, got:\n{err}");
+    for line in &lines {
+        for part in [" / 0.050 s (", "step ", "particle-steps/s", "elapsed, ETA "] {
+            assert!(line.contains(part), "`{part}` missing from `{line}`");
+        }
+        // One line each, no terminal control characters from a bar.
+        assert!(!line.contains('\r') && !line.contains('\u{1b}'), "{line:?}");
+    }
+    // Quiet: none.
+    let quiet = engine(
+        &[&args[..], &["-q"]].concat(),
+        &[("SPH_PROGRESS_SECONDS", "0")],
+    );
+    assert!(quiet.status.success());
+    assert!(!stderr(&quiet).contains("progress: "), "{}", stderr(&quiet));
+    // A bad interval is reported, and the run goes on with the default.
+    let bad = engine(&args, &[("SPH_PROGRESS_SECONDS", "-1")]);
+    assert!(bad.status.success());
+    assert!(
+        stderr(&bad).contains("SPH_PROGRESS_SECONDS=\"-1\" is not a number of seconds >= 0"),
+        "{}",
+        stderr(&bad)
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn negative_numbers_get_a_clear_error() {
+    let dam = shipped("dam_break.ron").display().to_string();
+    let study = shipped("studies/kernel.ron").display().to_string();
+    for (args, expect) in [
+        (
+            vec![dam.as_str(), "--threads", "-1"],
+            "--threads takes a positive whole number",
+        ),
+        (
+            vec![dam.as_str(), "--threads", "0"],
+            "--threads takes a positive whole number",
+        ),
+        (
+            vec![dam.as_str(), "--stop-at", "-1"],
+            "--stop-at takes seconds of simulated time > 0",
+        ),
+        (
+            vec![dam.as_str(), "--checkpoint-every", "-0.5"],
+            "--checkpoint-every takes seconds of simulated time > 0",
+        ),
+        (
+            vec!["resume", "somewhere", "--threads", "-2"],
+            "--threads takes a positive whole number",
+        ),
+        (
+            vec!["study", study.as_str(), "--workers", "-2"],
+            "--workers takes a positive whole number",
+        ),
+        (
+            vec!["bench", "--threads", "1,-1"],
+            "--threads takes a positive whole number",
+        ),
+    ] {
+        let o = engine(&args, &[]);
+        let err = stderr(&o);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        assert!(
+            err.contains(expect),
+            "{args:?}: `{expect}` missing from:\n{err}"
+        );
+        assert!(!err.contains("unexpected argument"), "{args:?}: {err}");
+    }
+}
+
+#[test]
+fn resume_says_when_the_folder_does_not_exist() {
+    let missing = temp("no-such-run");
+    let o = engine(&["resume", &missing.display().to_string()], &[]);
+    let err = stderr(&o);
+    assert!(!o.status.success());
+    assert!(
+        err.contains(&format!(
+            "{}: no such folder (expected a run's output folder holding checkpoint.bin",
+            missing.display()
+        )),
+        "{err}"
+    );
+    let file = shipped("dam_break.ron");
+    let o = engine(&["resume", &file.display().to_string()], &[]);
+    assert!(
+        stderr(&o).contains(": not a folder (expected"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn a_missing_study_file_is_called_the_study_file() {
+    let o = engine(&["study", "no_such_study.ron"], &[]);
+    let err = stderr(&o);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("error: no_such_study.ron: cannot read the study file:"),
+        "{err}"
+    );
+    assert!(!err.contains("field `study`"), "{err}");
+}
+
+#[test]
+fn set_errors_name_the_set_argument() {
+    let dam = shipped("dam_break.ron").display().to_string();
+    let set = "pipeline.forces.terms.artificial_viscosity.alfa=0.1";
+    let o = engine(&[&dam, "--set", set], &[]);
+    let err = stderr(&o);
+    assert!(!o.status.success());
+    assert!(
+        err.contains(&format!("dam_break.ron: --set {set}: field `alfa`: ")),
+        "{err}"
+    );
+    assert!(err.contains("did you mean `alpha`?"), "{err}");
+    let o = engine(&[&dam, "--set", "reinitialise.every"], &[]);
+    let err = stderr(&o);
+    assert!(
+        err.contains(
+            "expected `path=value`, e.g. `end_time=0.5` or `pipeline.reinitialise.every=5`"
+        ),
+        "{err}"
+    );
+}
+
+/// README's command list names every subcommand of `engine`.
+#[test]
+fn readme_lists_every_command() {
+    use clap::CommandFactory;
+    let readme =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../README.md"))
+            .expect("README.md");
+    let start = readme
+        .find("## Command line")
+        .expect("a Command line section");
+    let block = &readme[start..];
+    let block = &block[..block.find("```\n\n").expect("the command block ends")];
+    for sub in engine::Cli::command().get_subcommands() {
+        let line = format!("\nengine {}", sub.get_name());
+        assert!(
+            block.contains(&line),
+            "README's command list lacks `engine {}`",
+            sub.get_name()
+        );
+    }
+}
