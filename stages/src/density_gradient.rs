@@ -10,34 +10,17 @@
 //!
 //! A ghost takes its source particle's gradient unchanged: with the hydrostatic
 //! ghost density (`GhostWalls(hydrostatic: true)`) the density field continues across
-//! the wall, and so does its gradient. Place the stage after `NeighbourGrid` and
-//! before the stage whose terms include `DeltaSph()`.
+//! the wall, and so does its gradient. `Forces` computes the gradients before its pair
+//! sums when its terms include `DeltaSph()` (one pass more over the neighbours).
 
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
-use sph_core::components::{Density, Ghost, Mass, Position};
-use sph_core::contract::Access;
+use sph_core::components::Ghost;
 use sph_core::pair::{with_records, Field, Fields, Lane, Me, Pair, PairTerm, Pass};
 use sph_core::sim::Sim;
-use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{require_neighbours, DensityGradients, Neighbours};
+use sph_core::stage::StepError;
+use sph_core::vocab::{DensityGradients, Neighbours};
+use sph_core::with_kernel;
 use sph_core::world::{archetype, column};
-use sph_core::{with_kernel, StageRegistry};
-
-/// `DensityGradient()`: no parameters.
-#[derive(Debug, Default, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct Params {}
-
-pub fn register(registry: &mut StageRegistry) {
-    registry.register(
-        "density_gradient",
-        "renormalised density gradient of fluid and ghosts (for DeltaSph())",
-        |_: Params| Ok(DensityGradient),
-    );
-}
-
-pub struct DensityGradient;
 
 /// The sums of one particle: the matrix sum_j x_ji (x) grad W V_j (symmetric: grad W
 /// lies along x_ji) and sum_j (rho_j - rho_i) grad W V_j.
@@ -83,73 +66,55 @@ impl PairTerm for Renormalised {
     }
 }
 
-impl Stage for DensityGradient {
-    fn name(&self) -> &'static str {
-        "density_gradient"
-    }
-
-    fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
-        require_neighbours(sim, "density_gradient")
-    }
-
-    fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
-        let _span = tracing::trace_span!("pair_sums").entered();
-        let mut out = sim.resources.take::<DensityGradients>().unwrap_or_default();
-        let singular = with_records(sim, Renormalised.reads(), |sim, _, records| {
-            let Some(nb) = sim.resources.get::<Neighbours>() else {
-                return Ok(0);
-            };
-            let n = nb.n_fluid;
-            out.0.clear();
-            out.0.resize(records.len(), glam::DVec2::ZERO);
-            let c = &sim.constants;
-            let singular = with_kernel!(c.kernel, c.h, |k| {
-                let pass = Pass::new(&Renormalised, k, records)
-                    .map_err(|e| StepError::Internal(e.to_string()))?;
-                Ok::<usize, StepError>(
-                    out.0[..n]
-                        .par_iter_mut()
-                        .enumerate()
-                        .map(|(i, g)| {
-                            let (grad, singular) = pass.sum(i, nb.of(i));
-                            *g = grad;
-                            singular as usize
-                        })
-                        .sum(),
-                )
-            })?;
-            if let Some(ghosts) = archetype::<Ghost>(&sim.world) {
-                let sources = column::<Ghost>(ghosts)?;
-                let (fluid, ghost) = out.0.split_at_mut(n);
-                if ghost.len() != sources.len() {
-                    return Err(StepError::Internal(format!(
-                        "{} records beyond the fluid's {n} for {} ghosts",
-                        ghost.len(),
-                        sources.len()
-                    )));
-                }
-                for (g, s) in ghost.iter_mut().zip(sources.iter()) {
-                    *g = fluid.get(s.source as usize).copied().unwrap_or_default();
-                }
-            }
-            Ok(singular)
+/// Writes the renormalised density gradient of every fluid particle and ghost into the
+/// sim's [`DensityGradients`], from the current state and neighbour lists.
+pub(crate) fn compute(sim: &mut Sim) -> Result<(), StepError> {
+    let _span = tracing::trace_span!("pair_sums").entered();
+    let mut out = sim.resources.take::<DensityGradients>().unwrap_or_default();
+    let singular = with_records(sim, Renormalised.reads(), |sim, _, records| {
+        let Some(nb) = sim.resources.get::<Neighbours>() else {
+            return Ok(0);
+        };
+        let n = nb.n_fluid;
+        out.0.clear();
+        out.0.resize(records.len(), glam::DVec2::ZERO);
+        let c = &sim.constants;
+        let singular = with_kernel!(c.kernel, c.h, |k| {
+            let pass = Pass::new(&Renormalised, k, records)
+                .map_err(|e| StepError::Internal(e.to_string()))?;
+            Ok::<usize, StepError>(
+                out.0[..n]
+                    .par_iter_mut()
+                    .enumerate()
+                    .map(|(i, g)| {
+                        let (grad, singular) = pass.sum(i, nb.of(i));
+                        *g = grad;
+                        singular as usize
+                    })
+                    .sum(),
+            )
         })?;
-        if let Some(singular @ 1..) = singular {
-            *sim.diagnostics
-                .entry("gradient_unrenormalised".into())
-                .or_insert(0.0) += singular as f64;
+        if let Some(ghosts) = archetype::<Ghost>(&sim.world) {
+            let sources = column::<Ghost>(ghosts)?;
+            let (fluid, ghost) = out.0.split_at_mut(n);
+            if ghost.len() != sources.len() {
+                return Err(StepError::Internal(format!(
+                    "{} records beyond the fluid's {n} for {} ghosts",
+                    ghost.len(),
+                    sources.len()
+                )));
+            }
+            for (g, s) in ghost.iter_mut().zip(sources.iter()) {
+                *g = fluid.get(s.source as usize).copied().unwrap_or_default();
+            }
         }
-        sim.resources.insert(out);
-        Ok(())
+        Ok(singular)
+    })?;
+    if let Some(singular @ 1..) = singular {
+        *sim.diagnostics
+            .entry("gradient_unrenormalised".into())
+            .or_insert(0.0) += singular as f64;
     }
-
-    fn access(&self) -> Access {
-        Access::new()
-            .reads::<Neighbours>()
-            .reads::<Position>()
-            .reads::<Mass>()
-            .reads::<Density>()
-            .uses::<Ghost>()
-            .writes::<DensityGradients>()
-    }
+    sim.resources.insert(out);
+    Ok(())
 }

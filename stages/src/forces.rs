@@ -13,7 +13,8 @@ use sph_core::contract::Access;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{
-    require_neighbours, ArtificialViscosity, DiffusionPower, ViscousDissipation, WallPower,
+    require_neighbours, ArtificialViscosity, DensityGradients, DiffusionPower, ViscousDissipation,
+    WallPower,
 };
 use sph_core::world::ensure_component;
 use sph_core::StageRegistry;
@@ -84,6 +85,9 @@ impl Stage for Forces {
             power: sim.resources.contains::<ViscousDissipation>()
                 || sim.resources.contains::<DiffusionPower>(),
         };
+        if self.terms.delta_sph.is_some() {
+            crate::density_gradient::compute(sim)?;
+        }
         let power = rates::run(sim, &self.terms, out, &mut self.chunk_power)?;
         if let Some(d) = sim.resources.get_mut::<ViscousDissipation>() {
             d.power = power.viscous;
@@ -115,7 +119,9 @@ impl Stage for Forces {
             }),
             _ => None,
         });
+        let gradient = terms.iter().any(|t| matches!(t, TermSpec::DeltaSph(_)));
         let access = rates::declare_reads(Access::new(), reads)
+            .writes_if::<DensityGradients>(gradient)
             .writes::<Acceleration>()
             .writes_if::<DensityRate>(continuity)
             .writes::<ViscousDissipation>()

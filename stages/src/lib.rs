@@ -34,7 +34,6 @@ pub fn register_standard(registry: &mut StageRegistry) {
     ghost_walls::register(registry);
     neighbour_grid::register(registry);
     reinitialise::register(registry);
-    density_gradient::register(registry);
     eos::register(registry);
     continuity::register(registry);
     forces::register(registry);

@@ -11,7 +11,7 @@ use sph_core::contract::Access;
 use sph_core::pair::{with_records, EquationsOfMotion, Field, Fields, Pass, RateTerm};
 use sph_core::sim::Sim;
 use sph_core::stage::StepError;
-use sph_core::vocab::{DensityGradients, Neighbours};
+use sph_core::vocab::Neighbours;
 use sph_core::with_kernel;
 
 /// Declares in `access` the particle columns that records of `fields` are packed from.
@@ -24,7 +24,6 @@ pub(crate) fn declare_reads(access: Access, fields: Fields) -> Access {
         .reads_if::<Velocity>(has(&[Field::Vx, Field::Vy]))
         .reads_if::<Density>(has(&[Field::Rho, Field::Sound, Field::PRho2]))
         .reads_if::<Pressure>(has(&[Field::PRho2]))
-        .reads_if::<DensityGradients>(has(&[Field::GradRhoX, Field::GradRhoY]))
 }
 
 /// Fluid particles per parallel chunk.

@@ -14,7 +14,7 @@
 
 use sph_tests::stability::{run_hard_case, Bounds, Stability};
 
-const DAM: &str = include_str!("../../scenarios/dam_break.ron");
+const DAM: &str = include_str!("../../scenarios/dam_break_paper.ron");
 const HYDROSTATIC: &str = include_str!("../../scenarios/hydrostatic.ron");
 const SLOSHING_HIGH: &str = include_str!("../../scenarios/sloshing_high.ron");
 const THIN: &str = include_str!("../scenarios/thin_layer.ron");
@@ -41,7 +41,7 @@ fn dam_break_c12(kernel: &str, artificial_pressure: bool, across: u32, end: f64)
         "pipeline.probe.max_speed=true".into(),
     ];
     let overrides: Vec<&str> = overrides.iter().map(String::as_str).collect();
-    run_hard_case(DAM, "scenarios/dam_break.ron", &overrides)
+    run_hard_case(DAM, "scenarios/dam_break_paper.ron", &overrides)
 }
 
 /// Bounds for the c_0 = 12 m/s dam break to just past the first impact.

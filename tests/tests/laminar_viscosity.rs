@@ -209,12 +209,12 @@ fn couette_start_up_matches_the_analytic_profile() {
 #[test]
 fn laminar_viscosity_runs_in_a_scenario() {
     use sph_tests::support::{load, run_completed};
-    let text = include_str!("../../scenarios/dam_break.ron");
+    let text = include_str!("../../scenarios/dam_break_paper.ron");
     let terms = "pipeline.forces.terms=[PressureGradient(), ArtificialViscosity(), \
                  ArtificialPressure(), LaminarViscosity(nu: 1e-6), Continuity()]";
     let base = ["end_time=0.05", "resolution=ParticlesAcross(20)"];
-    let with = load(text, "dam_break.ron", &[base[0], base[1], terms]);
-    let without = load(text, "dam_break.ron", &base);
+    let with = load(text, "dam_break_paper.ron", &[base[0], base[1], terms]);
+    let without = load(text, "dam_break_paper.ron", &base);
     let (_, a, out_a) = run_completed(with, "laminar", 2);
     let (_, b, out_b) = run_completed(without, "no-laminar", 2);
     let by_id = |w: &hecs::World| {

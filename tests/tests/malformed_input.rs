@@ -3,7 +3,7 @@
 //! place in the file — whose line points at the offending line.
 //!
 //! One table-driven test: each case is a scenario text (usually a one-line mutation of
-//! the shipped `scenarios/dam_break.ron`), `--set` overrides, where the error must
+//! the shipped `scenarios/dam_break_paper.ron`), `--set` overrides, where the error must
 //! point, the field it must name and substrings its message must hold. Expected line
 //! numbers are computed from the constructed text (the line holding a marker string),
 //! and the mutations find fields and stages by name, so the table stays right when the
@@ -13,7 +13,7 @@ use sph_scenario::overrides::Override;
 use sph_scenario::{LoadError, Scenario};
 use std::time::{Duration, Instant};
 
-const DAM: &str = include_str!("../../scenarios/dam_break.ron");
+const DAM: &str = include_str!("../../scenarios/dam_break_paper.ron");
 
 /// Where the error must point.
 #[derive(Clone, Copy, Debug)]
@@ -75,7 +75,7 @@ fn dam(from: &str, to: &str) -> String {
     assert_eq!(
         DAM.matches(from).count(),
         1,
-        "`{from}` must occur exactly once in dam_break.ron"
+        "`{from}` must occur exactly once in dam_break_paper.ron"
     );
     DAM.replacen(from, to, 1)
 }
@@ -100,7 +100,7 @@ fn find_word(text: &str, name: &str, after: char) -> usize {
             _ => i += 1,
         }
     }
-    panic!("`{name}{after}` not in dam_break.ron")
+    panic!("`{name}{after}` not in dam_break_paper.ron")
 }
 
 /// End of the RON value starting at `start`: the first `,` or closing bracket outside
@@ -820,7 +820,7 @@ fn file_errors_beside_overrides_keep_their_place_in_the_file() {
         "Reinitialise(every: 1, bogus: 2",
         1,
     );
-    assert_ne!(text, DAM, "dam_break.ron has `Reinitialise(every: 1`");
+    assert_ne!(text, DAM, "dam_break_paper.ron has `Reinitialise(every: 1`");
     let load = |sets: &[&str]| {
         let overrides: Vec<Override> = sets.iter().map(|s| s.parse().unwrap()).collect();
         Scenario::from_str(&text, "dam.ron", &overrides, &registry).expect_err("bogus field")
@@ -859,7 +859,7 @@ fn set_usage_example_applies_to_a_shipped_scenario() {
     let registry = sph_stages::standard_registry();
     for example in examples {
         let ov: Override = example.parse().unwrap();
-        if let Err(e) = Scenario::from_str(DAM, "dam_break.ron", &[ov], &registry) {
+        if let Err(e) = Scenario::from_str(DAM, "dam_break_paper.ron", &[ov], &registry) {
             panic!("the example `{example}` does not load: {e}");
         }
     }

@@ -17,7 +17,7 @@ use sph_core::world::{archetype, column};
 use sph_core::Sim;
 use sph_tests::support::{load, nan_max, read_csv, run_completed};
 
-const SCENE: &str = include_str!("../../scenarios/dam_break.ron");
+const SCENE: &str = include_str!("../../scenarios/dam_break_paper.ron");
 
 fn run(sort_every: u32) -> (Sim, std::path::PathBuf) {
     run_scene(SCENE, sort_every, &format!("sort{sort_every}"))
@@ -34,8 +34,11 @@ fn run_scene(scene: &str, sort_every: u32, tag: &str) -> (Sim, std::path::PathBu
         "pipeline.energy.plots=false",
         &sort,
     ];
-    let (summary, sim, out) =
-        run_completed(load(scene, "scenarios/dam_break.ron", &overrides), tag, 2);
+    let (summary, sim, out) = run_completed(
+        load(scene, "scenarios/dam_break_paper.ron", &overrides),
+        tag,
+        2,
+    );
     assert!(summary.steps > 100, "{} steps", summary.steps);
     assert!(!summary.diagnostics.contains_key("cell_sort_skipped"));
     (sim, out)

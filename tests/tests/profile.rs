@@ -6,7 +6,7 @@
 use sph_run::runner::{run, RunOptions, StageTime};
 use sph_tests::support::{load, temp_out};
 
-const DAM: &str = include_str!("../../scenarios/dam_break.ron");
+const DAM: &str = include_str!("../../scenarios/dam_break_paper.ron");
 
 /// A coarse dam break with `Reinitialise()` twice (two Shepard filters in a row: a
 /// second updater of the density is allowed), for a few steps.
@@ -18,11 +18,11 @@ fn scenario() -> sph_scenario::Scenario {
     );
     assert_ne!(
         text, DAM,
-        "dam_break.ron lost its `Reinitialise(every: 1),`"
+        "dam_break_paper.ron lost its `Reinitialise(every: 1),`"
     );
     load(
         &text,
-        "dam_break.ron",
+        "dam_break_paper.ron",
         &[
             "resolution=ParticlesAcross(20)",
             "end_time=0.05",

@@ -37,6 +37,8 @@ shipped! {
         ["resolution=Spacing(0.1)", "end_time=0.3", "tank.width=4.0", "fluid_blocks=[(min: (0.1, 0.0), size: (3.9, 1.0))]", "wave_gauges=[(name: \"G10\", x: 2.0)]", "pipeline.damping_zone.from=3.0", "pipeline.damping_zone.to=4.0"];
     dam_break_is_deterministic: "dam_break.ron",
         ["resolution=ParticlesAcross(40)", "end_time=0.3"];
+    dam_break_paper_is_deterministic: "dam_break_paper.ron",
+        ["resolution=ParticlesAcross(40)", "end_time=0.3"];
     hydrostatic_is_deterministic: "hydrostatic.ron",
         ["resolution=Spacing(0.05)", "end_time=0.3"];
     sloshing_is_deterministic: "sloshing.ron",

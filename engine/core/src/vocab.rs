@@ -11,7 +11,7 @@
 //! - [`ViscousDissipation`]: the artificial viscosity's dissipation rate, asked for by
 //!   `Energy` and filled in by `Forces`.
 //! - [`DensityGradients`]: the renormalised density gradients of fluid and ghosts,
-//!   written by `DensityGradient`, read by the delta-SPH term.
+//!   written by `Forces` for its delta-SPH term.
 //! - [`DiffusionPower`]: the internal-energy change rate of a density diffusion,
 //!   asked for by `Energy` and filled in by `Forces`.
 //! - [`WallPower`]: the rate of work the walls do on the fluid through the ghosts,
@@ -265,8 +265,9 @@ pub struct ViscousDissipation {
 }
 
 /// The renormalised density gradient of every particle, fluid then ghosts (the joint
-/// numbering of the neighbour lists), written each step by the `DensityGradient`
-/// stage for the delta-SPH diffusion term (docs/physics.md, "Density diffusion").
+/// numbering of the neighbour lists), written each step by the momentum stage before
+/// its pair sums when its terms include delta-SPH's diffusion (docs/physics.md,
+/// "Density diffusion").
 #[derive(Debug, Default, Clone)]
 pub struct DensityGradients(pub Vec<glam::DVec2>);
 

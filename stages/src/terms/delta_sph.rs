@@ -1,7 +1,8 @@
 //! The delta-SPH density diffusion of Antuono et al. (2010, 2012) (docs/physics.md,
 //! "Density diffusion"): Molteni & Colagrossi's flux less its first-order part,
 //!   psi_ij = 2 (rho_j - rho_i) x_ji / r_ij^2 - (<grad rho>_i + <grad rho>_j),
-//! with the renormalised gradients of the `DensityGradient` stage. The correction
+//! with the renormalised gradients ([`crate::density_gradient`]), which `Forces`
+//! computes in a pass of its own before the pair sums when it has this term. The correction
 //! makes the term vanish on any linear density field (the hydrostatic one included),
 //! also where the kernel is cut off, so it is consistent at the free surface.
 
@@ -10,7 +11,7 @@ use super::Term;
 use sph_core::pair::{Field, Fields, Lane, Me, Pair, RateTerm, Rates};
 use sph_core::sim::Constants;
 
-/// `DeltaSph(delta: 0.1)`; needs `DensityGradient()` earlier in the pipeline.
+/// `DeltaSph(delta: 0.1)`.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct DeltaSph {
     scale: Scale,

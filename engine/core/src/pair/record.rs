@@ -284,13 +284,13 @@ impl Records {
                 Some(g) if g.len() == len => Some(g),
                 Some(g) => {
                     return Err(StepError::Internal(format!(
-                        "{} density gradients for {len} particles: the DensityGradient stage must run after GhostWalls and NeighbourGrid and before the stage whose terms read it",
+                        "{} density gradients for {len} particles: they were computed for another state",
                         g.len()
                     )))
                 }
                 None => {
                     return Err(StepError::Internal(
-                        "a pair term reads the density gradient, but no DensityGradient stage computed it".into(),
+                        "a pair term reads the density gradient, but no stage computed it".into(),
                     ))
                 }
             },
