@@ -74,12 +74,18 @@ fn surge_front_follows_martin_and_moyce() {
 /// scale, whose pressure moves by about +-0.07 about its mean there; a simulated mean
 /// inside that band is as close as the data resolve the plateau's level. Measured at
 /// 0.096 m: 0.57-0.58 for the three methods; at 0.16 m the same run reads 0.11, so the
-/// check tells the two heights apart. The spike before the plateau (p* ~ 5-6, a
-/// weakly compressible water hammer) is not compared (docs/validation.md).
+/// check tells the two heights apart.
+///
+/// First-impact peak: with the shipped scheme (Fourtakas's density diffusion) the
+/// 5 ms transducer mean (`P1.<method>.transducer`, the probe interval; the data are
+/// digitised at 5-20 ms) peaks within 25 % of Buchner's 0.69 (issue's acceptance;
+/// measured 0.82 by Method I, 0.75 by Method III). Method II, one particle's pressure,
+/// keeps that particle's acoustic noise (0.99) and is not held to it
+/// (docs/validation.md, "Density treatment").
 #[test]
 fn p1_rise_and_plateau_match_buchner() {
-    // t* = 3.3 is t = 0.817 s.
-    let mut overrides = vec!["end_time=0.82"];
+    // t* = 3.5 is t = 0.867 s.
+    let mut overrides = vec!["end_time=0.87"];
     overrides.extend(QUIET);
     let (_, _, out) = run_completed(load(SCENE, "scenarios/dam_break.ron", &overrides), "p1", 2);
     let (g, h): (f64, f64) = (9.81, 0.6);
@@ -122,6 +128,30 @@ fn p1_rise_and_plateau_match_buchner() {
         assert!(
             (low..=high).contains(&mean),
             "P1.{method} mean p* over t* 2.7-3.3 = {mean:.3}, Buchner spans {low:.3}-{high:.3}"
+        );
+    }
+    let first_peak = |points: &[(f64, f64)]| {
+        points
+            .iter()
+            .filter(|p| (2.3..=3.5).contains(&p.0))
+            .map(|p| p.1)
+            .fold(f64::NEG_INFINITY, f64::max)
+    };
+    let measured_peak = first_peak(&data);
+    assert!(
+        (measured_peak - 0.69).abs() < 0.01,
+        "reference peak {measured_peak}"
+    );
+    for method in ["shepard", "averaged"] {
+        let p1: Vec<(f64, f64)> =
+            series(&out.join("probes.csv"), &format!("P1.{method}.transducer"))
+                .iter()
+                .map(|&(t, p)| (t * t_scale, p / p_scale))
+                .collect();
+        let peak = first_peak(&p1);
+        assert!(
+            (peak / measured_peak - 1.0).abs() < 0.25,
+            "P1.{method}.transducer first-impact peak {peak:.3}, Buchner {measured_peak:.3}"
         );
     }
 }

@@ -8,7 +8,11 @@
 use sph_scenario::Scenario;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
-const SHIPPED: [(&str, &str); 9] = [
+const SHIPPED: [(&str, &str); 10] = [
+    (
+        "scenarios/sloshing_paper.ron",
+        include_str!("../../scenarios/sloshing_paper.ron"),
+    ),
     (
         "scenarios/dam_break_paper.ron",
         include_str!("../../scenarios/dam_break_paper.ron"),

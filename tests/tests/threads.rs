@@ -43,6 +43,8 @@ shipped! {
         ["resolution=Spacing(0.05)", "end_time=0.3"];
     sloshing_is_deterministic: "sloshing.ron",
         ["resolution=ParticlesAcross(60)", "end_time=0.4", "tank.motion.ramp=0.1"];
+    sloshing_paper_is_deterministic: "sloshing_paper.ron",
+        ["resolution=ParticlesAcross(60)", "end_time=0.4", "tank.motion.ramp=0.1"];
     sloshing_high_is_deterministic: "sloshing_high.ron",
         ["resolution=ParticlesAcross(27)", "end_time=0.3", "tank.motion.ramp=0.1"];
     wave_breaking_is_deterministic: "wave_breaking.ron",
