@@ -307,6 +307,19 @@ fn a_case_that_stops_early_runs_again_with_the_fallback_scheme() {
     let one = run_one_case(&study, 0, &out, 1, &registry).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(one.len(), 1);
     assert!(!one[0].0);
+    // A report of a folder without case 1: named as not run, not as failed.
+    std::fs::remove_dir_all(out.join("guard_0.5")).unwrap();
+    let opts = StudyOptions {
+        workers: 1,
+        threads: 1,
+        report_only: true,
+    };
+    run_study(&study, &registry, &out, opts, &|_| ()).unwrap_or_else(|e| panic!("{e}"));
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(
+        report.contains("Completed by neither scheme: guard_0.5 (not run)."),
+        "{report}"
+    );
     let _ = std::fs::remove_dir_all(&out);
 }
 

@@ -95,11 +95,24 @@ pub fn main(args: &StudyArgs, registry: &StageRegistry) -> Result<(), String> {
         report_only: args.report_only,
     };
     let rows = run_study(&study, registry, &out, opts, &|line| println!("{line}"))?;
-    let completed = rows.iter().filter(|r| r.completed()).count();
+    let completed = |fallback: bool| {
+        let of = rows.iter().filter(|r| r.case.fallback == fallback);
+        (of.clone().filter(|r| r.completed()).count(), of.count())
+    };
+    let (done, cases) = completed(false);
+    let again = match &study.spec.fallback {
+        Some(fb) => {
+            let (done, runs) = completed(true);
+            format!(
+                " (`{}`), {runs} ran again with `{}` and {done} of those completed",
+                fb.base, fb.label
+            )
+        }
+        None => String::new(),
+    };
     println!(
-        "study {}: {completed} of {} cases completed, {:.1} s wall; study.csv and report.md in {}",
+        "study {}: {done} of {cases} cases completed{again}, {:.1} s wall; study.csv and report.md in {}",
         study.spec.name,
-        rows.len(),
         start.elapsed().as_secs_f64(),
         out.display()
     );

@@ -1244,13 +1244,19 @@ fn write_report(
             let again: Vec<&Row> = rows.iter().filter(|r| r.case.fallback).collect();
             let done = |v: &[&Row]| v.iter().filter(|r| r.completed()).count();
             // Cases completed by neither scheme.
-            let unfinished: Vec<&str> = base
+            let unfinished: Vec<String> = base
                 .iter()
                 .filter(|r| {
                     let name = format!("{}__{}", r.case.name, fb.label);
                     !r.completed() && !again.iter().any(|f| f.case.name == name && f.completed())
                 })
-                .map(|r| r.case.name.as_str())
+                .map(|r| {
+                    if r.status == "not run" {
+                        format!("{} (not run)", r.case.name)
+                    } else {
+                        r.case.name.clone()
+                    }
+                })
                 .collect();
             let _ = writeln!(
                 md,
@@ -1270,7 +1276,7 @@ fn write_report(
                 if unfinished.is_empty() {
                     "Every case completed with one of the two schemes.".to_string()
                 } else {
-                    format!("Completed with neither scheme: {}.", unfinished.join(", "))
+                    format!("Completed by neither scheme: {}.", unfinished.join(", "))
                 }
             );
         }
