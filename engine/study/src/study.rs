@@ -491,7 +491,7 @@ pub fn fallback_cases(
         })?;
         extra.push(o);
     }
-    Ok(cases
+    let runs: Vec<Case> = cases
         .iter()
         .map(|c| {
             let mut overrides = c.overrides.clone();
@@ -504,7 +504,18 @@ pub fn fallback_cases(
                 fallback: true,
             }
         })
-        .collect())
+        .collect();
+    if let Some(clash) = runs.iter().find(|r| cases.iter().any(|c| c.name == r.name)) {
+        return Err(error(
+            &format!("{:?}", fb.label),
+            "fallback.label",
+            format!(
+                "the fallback run's folder `{}` is also a case's: choose another label",
+                clash.name
+            ),
+        ));
+    }
+    Ok(runs)
 }
 
 /// The cases of a study, in order: for one-at-a-time, the base case first.
@@ -1393,6 +1404,18 @@ mod tests {
         let spec: StudySpec = parse_ron(&same, "s.ron").unwrap();
         let e = fallback_cases(&spec, "s.ron", &same, &cases).unwrap_err();
         assert_eq!((e.line, e.field.as_deref()), (3, Some("fallback.label")));
+    }
+
+    #[test]
+    fn a_fallback_folder_that_is_a_case_folder_is_refused() {
+        let text = r#"Study(name: "s", scenario: "x.ron",
+            parameters: [(name: "a", path: "end_time", values: ["1.0", "2.0"], labels: ["x", "x__f"])],
+            fallback: (label: "f", set: ["end_time=3.0"]))"#;
+        let spec: StudySpec = parse_ron(text, "s.ron").unwrap_or_else(|e| panic!("{e}"));
+        let cases = cases(&spec, "s.ron", &[]).unwrap();
+        let e = fallback_cases(&spec, "s.ron", text, &cases).unwrap_err();
+        assert!(e.to_string().contains("`a_x__f` is also a case's"), "{e}");
+        assert_eq!(e.line, 3);
     }
 
     fn spec_without_fallback() -> StudySpec {
