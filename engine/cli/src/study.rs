@@ -26,12 +26,15 @@ pub struct StudyArgs {
     #[arg(long)]
     pub report_only: bool,
     /// Run case K alone (its number, 1 to the number of cases, or its folder name),
-    /// exactly as the study runs it: into <out>/<case>/, skipped if finished there. What
-    /// a task of the --submit slurm job array runs. Writes no study.csv.
+    /// exactly as the study runs it: into <out>/<case>/, skipped if finished there; if it
+    /// stopped early and the study has a fallback, then its fallback run into
+    /// <out>/<case>__<label>/ the same way. What a task of the --submit slurm job array
+    /// runs. Writes no study.csv.
     #[arg(long, value_name = "K", conflicts_with_all = ["report_only", "workers", "status", "submit"])]
     pub case: Option<String>,
     /// Print a table of the cases, read from their folders: finished, stopped early,
-    /// running, interrupted, not started. Runs nothing.
+    /// running, interrupted, not started; the fallback run of a case that stopped early
+    /// under it (K+). Runs nothing.
     #[arg(long, conflicts_with_all = ["report_only", "workers", "threads", "submit"])]
     pub status: bool,
     #[command(flatten)]
@@ -66,11 +69,7 @@ pub fn main(args: &StudyArgs, registry: &StageRegistry) -> Result<(), String> {
         if args.report_only {
             return Err("--report-only runs nothing: drop it from --submit, whose report job writes the report".into());
         }
-        let pending: Vec<usize> = status::study_status(&study, &out)
-            .into_iter()
-            .filter(|(_, s)| !s.is_done())
-            .map(|(k, _)| k)
-            .collect();
+        let pending = status::pending_cases(&study, &out);
         let job = crate::slurm::StudyJob {
             name: &study.spec.name,
             study_file: &args.study,
@@ -96,11 +95,24 @@ pub fn main(args: &StudyArgs, registry: &StageRegistry) -> Result<(), String> {
         report_only: args.report_only,
     };
     let rows = run_study(&study, registry, &out, opts, &|line| println!("{line}"))?;
-    let completed = rows.iter().filter(|r| r.completed()).count();
+    let completed = |fallback: bool| {
+        let of = rows.iter().filter(|r| r.case.fallback == fallback);
+        (of.clone().filter(|r| r.completed()).count(), of.count())
+    };
+    let (done, cases) = completed(false);
+    let again = match &study.spec.fallback {
+        Some(fb) => {
+            let (done, runs) = completed(true);
+            format!(
+                " (`{}`), {runs} ran again with `{}` and {done} of those completed",
+                fb.base, fb.label
+            )
+        }
+        None => String::new(),
+    };
     println!(
-        "study {}: {completed} of {} cases completed, {:.1} s wall; study.csv and report.md in {}",
+        "study {}: {done} of {cases} cases completed{again}, {:.1} s wall; study.csv and report.md in {}",
         study.spec.name,
-        rows.len(),
         start.elapsed().as_secs_f64(),
         out.display()
     );
@@ -125,21 +137,23 @@ fn one_case(
         index + 1,
         dir.display()
     );
-    let (ran, row) = run_one_case(study, index, out, threads, registry)?;
-    if ran {
-        println!(
-            "case {}/{n} {name}: {} ({:.1} s wall, {:.3e} particle-steps/s)",
-            index + 1,
-            row.status,
-            row.wall_seconds,
-            row.particle_steps_per_second
-        );
-    } else {
-        println!(
-            "case {}/{n} {name}: finished earlier ({}), skipped",
-            index + 1,
-            row.status
-        );
+    for (ran, row) in run_one_case(study, index, out, threads, registry)? {
+        let name = &row.case.name;
+        if ran {
+            println!(
+                "case {}/{n} {name}: {} ({:.1} s wall, {:.3e} particle-steps/s)",
+                index + 1,
+                row.status,
+                row.wall_seconds,
+                row.particle_steps_per_second
+            );
+        } else {
+            println!(
+                "case {}/{n} {name}: finished earlier ({}), skipped",
+                index + 1,
+                row.status
+            );
+        }
     }
     Ok(())
 }
@@ -147,8 +161,9 @@ fn one_case(
 /// `--status`: the cases' table, and the last Slurm submission if there was one.
 fn status(study: &Study, out: &std::path::Path) -> Result<(), String> {
     let states = status::study_status(study, out);
+    let fallbacks = status::fallback_status(study, out, &states);
     println!("study {} in {}:", study.spec.name, out.display());
-    print!("{}", status::status_table(study, &states));
+    print!("{}", status::status_table(study, &states, &fallbacks));
     if let Some(line) = crate::slurm::last_submission(out) {
         println!(
             "last submitted to Slurm: {line} ({})",

@@ -8,7 +8,10 @@
 //! figures ([`figures`]) and `report.md`.
 //!
 //! A case that stops early (e.g. the density guard) is a row with its stop reason and
-//! the metrics of the part it ran, not a failure of the study.
+//! the metrics of the part it ran, not a failure of the study. A study with a
+//! [`Fallback`] then runs that case again with the fallback's overrides appended, into
+//! `<out>/<case>__<label>/`, as a row right after the case's; the `scheme` column says
+//! which scheme each row used.
 
 pub mod figures;
 pub mod metrics;
@@ -48,6 +51,33 @@ pub struct StudySpec {
     /// Times of the cases' `snapshot_t<time>.png` (Snapshots stage) shown side by side.
     #[serde(default)]
     pub snapshots: Vec<f64>,
+    /// A second scheme for the cases that stop early. Default: none.
+    #[serde(default)]
+    pub fallback: Option<Fallback>,
+}
+
+/// The scheme a case that stops early runs again with: the case's overrides, then
+/// `set`, into `<case>__<label>/`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Fallback {
+    /// The fallback scheme's name: the `scheme` column of its rows, the suffix of their
+    /// folders, the legends of the figures. Default `fallback`.
+    #[serde(default = "fallback_label")]
+    pub label: String,
+    /// The base scheme's name in the `scheme` column. Default `paper`.
+    #[serde(default = "paper_label")]
+    pub base: String,
+    /// `--set` overrides appended to the case's, e.g.
+    /// `"pipeline.reinitialise.every=1000000000"`.
+    pub set: Vec<String>,
+}
+
+fn fallback_label() -> String {
+    "fallback".into()
+}
+fn paper_label() -> String {
+    "paper".into()
 }
 
 /// How the parameters' values combine into cases.
@@ -236,6 +266,23 @@ pub struct Case {
     pub name: String,
     pub labels: Vec<String>,
     pub overrides: Vec<Override>,
+    /// The scheme's name in the `scheme` column (studies with a [`Fallback`] only).
+    pub scheme: Option<String>,
+    /// Whether this is the fallback run of a case that stopped early.
+    pub fallback: bool,
+}
+
+impl Case {
+    /// The case's name in the figures' legends: a fallback run as `<case> (<label>)`.
+    pub fn legend(&self) -> String {
+        match (&self.scheme, self.fallback) {
+            (Some(s), true) => {
+                let base = self.name.strip_suffix(&format!("__{s}"));
+                format!("{} ({s})", base.unwrap_or(&self.name))
+            }
+            _ => self.name.clone(),
+        }
+    }
 }
 
 /// A loaded study: spec, where it came from, its cases.
@@ -245,6 +292,9 @@ pub struct Study {
     pub file: PathBuf,
     pub scenario: PathBuf,
     pub cases: Vec<Case>,
+    /// With a [`Fallback`]: each case's fallback run, in case order (run only if the
+    /// case stops early). Empty without.
+    pub fallbacks: Vec<Case>,
 }
 
 /// One study.csv row.
@@ -271,6 +321,7 @@ impl Row {
     pub fn cells(&self, number: impl Fn(f64) -> String) -> Vec<String> {
         let mut cells = vec![self.case.name.clone()];
         cells.extend(self.case.labels.iter().cloned());
+        cells.extend(self.case.scheme.iter().cloned());
         cells.push(self.status.clone());
         let numbers = [
             self.fluid_particles,
@@ -322,9 +373,20 @@ impl Study {
         let dir = path.parent().unwrap_or(Path::new("."));
         let scenario = dir.join(&spec.scenario);
         let cases = cases(&spec, &file, overrides)?;
+        let fallbacks = fallback_cases(&spec, &file, &text, &cases)?;
         for case in &cases {
             Scenario::load(&scenario, &case.overrides, registry).map_err(|mut e| {
                 e.message = format!("(study {file}, case {}) {}", case.name, e.message);
+                e
+            })?;
+        }
+        for case in &fallbacks {
+            Scenario::load(&scenario, &case.overrides, registry).map_err(|mut e| {
+                let (line, column) = locate(&text, "fallback");
+                e.message = format!(
+                    "(study {file}:{line}:{column}, the fallback of case {}) {}",
+                    case.name, e.message
+                );
                 e
             })?;
         }
@@ -333,6 +395,7 @@ impl Study {
             file: path.to_path_buf(),
             scenario,
             cases,
+            fallbacks,
         })
     }
 
@@ -340,6 +403,119 @@ impl Study {
     pub fn resolve(&self, p: &str) -> PathBuf {
         self.file.parent().unwrap_or(Path::new(".")).join(p)
     }
+}
+
+/// Line and column (1-based) of the first `needle` in `text` (the file's start if
+/// absent), to point an error at a field of the study file; a needle that is a field
+/// name (`fallback`) is found where it is followed by `:`.
+fn locate(text: &str, needle: &str) -> (usize, usize) {
+    let field = needle
+        .chars()
+        .all(|c| c.is_ascii_alphanumeric() || c == '_');
+    let at = text
+        .match_indices(needle)
+        .map(|(i, _)| i)
+        .find(|&i| {
+            !field
+                || (text[..i]
+                    .chars()
+                    .next_back()
+                    .is_none_or(|c| !c.is_ascii_alphanumeric() && c != '_' && c != '/')
+                    && text[i + needle.len()..].trim_start().starts_with(':'))
+        })
+        .unwrap_or(0);
+    let before = &text[..at];
+    let line = before.matches('\n').count() + 1;
+    let column = before.rfind('\n').map_or(at, |n| at - n - 1) + 1;
+    (line, column)
+}
+
+/// The fallback runs of `cases` (none without a `fallback` field): each case's
+/// overrides with the fallback's appended, named `<case>__<label>`. Errors point at
+/// the offending entry of the study file.
+pub fn fallback_cases(
+    spec: &StudySpec,
+    file: &str,
+    text: &str,
+    cases: &[Case],
+) -> Result<Vec<Case>, LoadError> {
+    let Some(fb) = &spec.fallback else {
+        return Ok(Vec::new());
+    };
+    let error = |needle: &str, field: &str, message: String| {
+        let (line, column) = locate(text, needle);
+        LoadError {
+            line,
+            column,
+            ..spec_error(file, field, message)
+        }
+    };
+    if fb.label.is_empty() || folder_safe(&fb.label) != fb.label {
+        return Err(error(
+            &format!("{:?}", fb.label),
+            "fallback.label",
+            format!(
+                "`{}` is not a folder-name suffix: use letters, digits, `.`, `-` and `_`",
+                fb.label
+            ),
+        ));
+    }
+    if fb.label == fb.base {
+        return Err(error(
+            &format!("{:?}", fb.label),
+            "fallback.label",
+            format!(
+                "`{}` is also the base scheme's name (fallback.base): give the two schemes different names",
+                fb.label
+            ),
+        ));
+    }
+    if fb.set.is_empty() {
+        return Err(error(
+            "fallback",
+            "fallback.set",
+            "give the overrides of the fallback scheme, e.g. set: [\"pipeline.reinitialise.every=1000000000\"]".into(),
+        ));
+    }
+    let mut extra = Vec::new();
+    for s in &fb.set {
+        let o = s.parse::<Override>().map_err(|e| {
+            // The entry as written in the file (quotes escaped) if it can be found.
+            let needle = format!("{s:?}");
+            let needle = if text.contains(&needle) {
+                needle
+            } else {
+                "fallback".into()
+            };
+            error(&needle, "fallback.set", e.to_string())
+        })?;
+        extra.push(o);
+    }
+    let runs: Vec<Case> = cases
+        .iter()
+        .map(|c| {
+            let mut overrides = c.overrides.clone();
+            overrides.extend(extra.iter().cloned());
+            Case {
+                name: format!("{}__{}", c.name, fb.label),
+                labels: c.labels.clone(),
+                overrides,
+                scheme: Some(fb.label.clone()),
+                fallback: true,
+            }
+        })
+        .collect();
+    if let Some(clash) = runs.iter().find(|r| cases.iter().any(|c| c.name == r.name)) {
+        return Err(error(
+            &format!("{:?}", fb.label),
+            "fallback.label",
+            format!(
+                "the fallback run's folder `{}` is also a case's: choose another label",
+                clash.name
+            ),
+        ));
+    }
+    Ok(runs)
 }
 
 /// The cases of a study, in order: for one-at-a-time, the base case first.
@@ -449,6 +625,8 @@ pub fn cases(spec: &StudySpec, file: &str, extra: &[Override]) -> Result<Vec<Cas
                 name: name.join("__"),
                 labels,
                 overrides,
+                scheme: spec.fallback.as_ref().map(|f| f.base.clone()),
+                fallback: false,
             }
         })
         .collect())
@@ -564,27 +742,98 @@ pub fn find_case(study: &Study, k: &str) -> Result<usize, String> {
     })
 }
 
+/// Whether `dir` holds a run of `case` that stopped early (its summary's status is
+/// not `completed`): the case whose fallback runs.
+pub fn stopped_early(dir: &Path, case: &Case) -> bool {
+    matches!(
+        status::case_state(dir, case),
+        status::CaseState::StoppedEarly { .. }
+    )
+}
+
+/// Whether a case ran now, and why it could not run if it could not.
+type Outcome = (bool, Result<(), String>);
+
+/// Runs `case` into `<out_dir>/<case>/` unless that folder holds its finished run
+/// (or, with `report_only`, at all: then the row is `not run`).
+fn run_or_skip(
+    study: &Study,
+    case: &Case,
+    out_dir: &Path,
+    (threads, report_only): (usize, bool),
+    registry: &StageRegistry,
+    report: &(dyn Fn(&str) + Sync),
+) -> Outcome {
+    let dir = out_dir.join(&case.name);
+    if finished(&dir, case) {
+        report(&format!("{}: finished earlier, skipped", case.name));
+        return (false, Ok(()));
+    }
+    if report_only {
+        return (false, Err("not run".to_string()));
+    }
+    (true, run_case(study, case, &dir, threads, registry))
+}
+
+/// Case `index` and, if it stopped early and the study has a fallback, its fallback
+/// run right after it (in the same worker).
+fn run_with_fallback(
+    study: &Study,
+    index: usize,
+    out_dir: &Path,
+    how: (usize, bool),
+    registry: &StageRegistry,
+    report: &(dyn Fn(&str) + Sync),
+) -> (Outcome, Option<Outcome>) {
+    let case = &study.cases[index];
+    let first = run_or_skip(study, case, out_dir, how, registry, report);
+    let fallback = study
+        .fallbacks
+        .get(index)
+        .filter(|_| stopped_early(&out_dir.join(&case.name), case))
+        .map(|fb| {
+            if !finished(&out_dir.join(&fb.name), fb) && !how.1 {
+                report(&format!(
+                    "{}: stopped early; running it again as {}",
+                    case.name, fb.name
+                ));
+            }
+            run_or_skip(study, fb, out_dir, how, registry, report)
+        });
+    (first, fallback)
+}
+
 /// Runs case `index` (0-based) alone, exactly as [`run_study`] runs it: into
 /// `<out_dir>/<case>/` with its `case.txt`, skipped if that folder already holds its
-/// finished run. Writes no study.csv (the report does, e.g. `--report-only`). Returns
-/// whether it ran and its row.
+/// finished run; then, if it stopped early and the study has a fallback, the fallback
+/// run into `<out_dir>/<case>__<label>/` the same way. Writes no study.csv (the report
+/// does, e.g. `--report-only`). Returns whether each ran and its row: the case's, then
+/// its fallback's if that was due.
 pub fn run_one_case(
     study: &Study,
     index: usize,
     out_dir: &Path,
     threads: usize,
     registry: &StageRegistry,
-) -> Result<(bool, Row), String> {
-    let case = study
-        .cases
-        .get(index)
-        .ok_or_else(|| format!("study {} has no case {}", study.spec.name, index + 1))?;
-    let dir = out_dir.join(&case.name);
-    if finished(&dir, case) {
-        return Ok((false, evaluate(study, case, &dir, false, None, registry)));
+) -> Result<Vec<(bool, Row)>, String> {
+    if index >= study.cases.len() {
+        return Err(format!(
+            "study {} has no case {}",
+            study.spec.name,
+            index + 1
+        ));
     }
-    run_case(study, case, &dir, threads, registry)?;
-    Ok((true, evaluate(study, case, &dir, true, None, registry)))
+    let (first, fallback) =
+        run_with_fallback(study, index, out_dir, (threads, false), registry, &|_| ());
+    let mut rows = Vec::new();
+    for (case, (ran, outcome)) in std::iter::once((&study.cases[index], first))
+        .chain(fallback.map(|o| (&study.fallbacks[index], o)))
+    {
+        outcome?;
+        let row = evaluate(study, case, &out_dir.join(&case.name), ran, None, registry);
+        rows.push((ran, row));
+    }
+    Ok(rows)
 }
 
 /// How [`run_study`] runs the cases.
@@ -598,8 +847,10 @@ pub struct StudyOptions {
     pub report_only: bool,
 }
 
-/// Runs (or resumes) every case, `workers` at a time on `threads` threads each, then
-/// writes study.csv, the figures and report.md into `out_dir`. Returns the rows.
+/// Runs (or resumes) every case, `workers` at a time on `threads` threads each (a
+/// case's fallback run right after it, in the same worker), then writes study.csv, the
+/// figures and report.md into `out_dir`. Returns the rows: each case's, followed by
+/// its fallback's if it stopped early.
 pub fn run_study(
     study: &Study,
     registry: &StageRegistry,
@@ -614,39 +865,38 @@ pub fn run_study(
     } = opts;
     std::fs::create_dir_all(out_dir).map_err(|e| format!("{}: {e}", out_dir.display()))?;
     let n = study.cases.len();
-    let outcomes = crate::parallel::run_parallel(&study.cases, workers, |i, case| {
-        let dir = out_dir.join(&case.name);
-        if finished(&dir, case) {
-            report(&format!(
-                "case {}/{n} {}: finished earlier, skipped",
-                i + 1,
-                case.name
-            ));
-            return (false, Ok(()));
-        }
-        if report_only {
-            return (false, Err("not run".to_string()));
-        }
-        let r = run_case(study, case, &dir, threads, registry);
-        (true, r)
+    let outcomes = crate::parallel::run_parallel(&study.cases, workers, |i, _| {
+        let numbered = |line: &str| report(&format!("case {}/{n} {line}", i + 1));
+        run_with_fallback(
+            study,
+            i,
+            out_dir,
+            (threads, report_only),
+            registry,
+            &numbered,
+        )
     });
     let mut rows = Vec::new();
-    for (case, (ran, outcome)) in study.cases.iter().zip(outcomes) {
-        let row = evaluate(
-            study,
-            case,
-            &out_dir.join(&case.name),
-            ran,
-            outcome.err(),
-            registry,
-        );
-        if ran {
-            report(&format!(
-                "case {}: {} ({:.1} s wall, {:.3e} particle-steps/s)",
-                case.name, row.status, row.wall_seconds, row.particle_steps_per_second
-            ));
+    for (i, (first, fallback)) in outcomes.into_iter().enumerate() {
+        for (case, (ran, outcome)) in std::iter::once((&study.cases[i], first))
+            .chain(fallback.map(|o| (&study.fallbacks[i], o)))
+        {
+            let row = evaluate(
+                study,
+                case,
+                &out_dir.join(&case.name),
+                ran,
+                outcome.err(),
+                registry,
+            );
+            if ran {
+                report(&format!(
+                    "case {}: {} ({:.1} s wall, {:.3e} particle-steps/s)",
+                    case.name, row.status, row.wall_seconds, row.particle_steps_per_second
+                ));
+            }
+            rows.push(row);
         }
-        rows.push(row);
     }
     write_csv(&out_dir.join("study.csv"), study, &rows)?;
     let figures = figures::draw(study, out_dir, &rows, registry)?;
@@ -907,6 +1157,9 @@ fn metric_values(
 pub fn header(study: &Study, rows: &[Row]) -> Vec<String> {
     let mut h = vec!["case".to_string()];
     h.extend(study.spec.parameters.iter().map(|p| p.name.clone()));
+    if study.spec.fallback.is_some() {
+        h.push("scheme".into());
+    }
     h.extend(
         [
             "status",
@@ -972,7 +1225,7 @@ fn write_report(
             Design::OneAtATime => "one-at-a-time",
             Design::Grid => "full-grid",
         },
-        rows.len(),
+        study.cases.len(),
         if s.set.is_empty() {
             "none".into()
         } else {
@@ -993,7 +1246,52 @@ fn write_report(
         }
     );
     let completed = rows.iter().filter(|r| r.completed()).count();
-    let _ = writeln!(md, "{completed} of {} cases completed.\n", rows.len());
+    match &s.fallback {
+        None => {
+            let _ = writeln!(md, "{completed} of {} cases completed.\n", rows.len());
+        }
+        Some(fb) => {
+            let base: Vec<&Row> = rows.iter().filter(|r| !r.case.fallback).collect();
+            let again: Vec<&Row> = rows.iter().filter(|r| r.case.fallback).collect();
+            let done = |v: &[&Row]| v.iter().filter(|r| r.completed()).count();
+            // Cases completed by neither scheme.
+            let unfinished: Vec<String> = base
+                .iter()
+                .filter(|r| {
+                    let name = format!("{}__{}", r.case.name, fb.label);
+                    !r.completed() && !again.iter().any(|f| f.case.name == name && f.completed())
+                })
+                .map(|r| {
+                    if r.status == "not run" {
+                        format!("{} (not run)", r.case.name)
+                    } else {
+                        r.case.name.clone()
+                    }
+                })
+                .collect();
+            let _ = writeln!(
+                md,
+                "{} of {} cases completed with the `{}` scheme. A case that stops early runs \
+                 again with the `{}` scheme (the case's overrides, then `{}`), as the row after \
+                 it, named `<case>__{}`; the `scheme` column says which scheme each row used. \
+                 {} case(s) ran again with `{}`, {} of them completed. {}\n",
+                done(&base),
+                base.len(),
+                fb.base,
+                fb.label,
+                fb.set.join("`, `"),
+                fb.label,
+                again.len(),
+                fb.label,
+                done(&again),
+                if unfinished.is_empty() {
+                    "Every case completed with one of the two schemes.".to_string()
+                } else {
+                    format!("Completed by neither scheme: {}.", unfinished.join(", "))
+                }
+            );
+        }
+    }
     let head = header(study, rows);
     let _ = writeln!(md, "| {} |", head.join(" | "));
     let _ = writeln!(md, "|{}", "---|".repeat(head.len()));
@@ -1012,7 +1310,7 @@ fn write_report(
                 let file = out_dir
                     .join(&r.case.name)
                     .join(format!("snapshot_t{t:.3}.png"));
-                (r.case.name.clone(), file)
+                (r.case.legend(), file)
             })
             .collect();
         let file = format!("snapshots_t{t:.3}.png");
@@ -1070,6 +1368,66 @@ mod tests {
                 "h_over_dx=0.9"
             ]
         );
+    }
+
+    #[test]
+    fn fallback_runs_append_their_overrides_and_name_their_scheme() {
+        let text = r#"Study(name: "s", scenario: "x.ron", set: ["end_time=1.0"],
+            parameters: [(name: "c0", path: "fluid.sound_speed", values: ["12.0", "25.0"])],
+            fallback: (label: "fourtakas", set: ["pipeline.reinitialise.every=1000000000"]))"#;
+        let spec: StudySpec = parse_ron(text, "s.ron").unwrap_or_else(|e| panic!("{e}"));
+        let cases = cases(&spec, "s.ron", &[]).unwrap();
+        assert!(cases.iter().all(|c| c.scheme.as_deref() == Some("paper")));
+        let fallbacks = fallback_cases(&spec, "s.ron", text, &cases).unwrap();
+        assert_eq!(fallbacks.len(), 2);
+        let f = &fallbacks[1];
+        assert_eq!(f.name, "c0_25.0__fourtakas");
+        assert_eq!(f.legend(), "c0_25.0 (fourtakas)");
+        assert_eq!(cases[1].legend(), "c0_25.0");
+        assert_eq!((f.scheme.as_deref(), f.fallback), (Some("fourtakas"), true));
+        let raw: Vec<&str> = f.overrides.iter().map(|o| o.raw.as_str()).collect();
+        assert_eq!(
+            raw,
+            [
+                "end_time=1.0",
+                "fluid.sound_speed=25.0",
+                "pipeline.reinitialise.every=1000000000"
+            ]
+        );
+        // No fallback field: no scheme, no fallback runs.
+        let plain = spec_without_fallback();
+        let c = super::cases(&plain, "s.ron", &[]).unwrap();
+        assert!(c.iter().all(|c| c.scheme.is_none()));
+        assert!(fallback_cases(&plain, "s.ron", "", &c).unwrap().is_empty());
+        // The same name for both schemes is refused, at the label.
+        let same = text.replace("label: \"fourtakas\"", "label: \"paper\"");
+        let spec: StudySpec = parse_ron(&same, "s.ron").unwrap();
+        let e = fallback_cases(&spec, "s.ron", &same, &cases).unwrap_err();
+        assert_eq!((e.line, e.field.as_deref()), (3, Some("fallback.label")));
+    }
+
+    #[test]
+    fn a_fallback_folder_that_is_a_case_folder_is_refused() {
+        let text = r#"Study(name: "s", scenario: "x.ron",
+            parameters: [(name: "a", path: "end_time", values: ["1.0", "2.0"], labels: ["x", "x__f"])],
+            fallback: (label: "f", set: ["end_time=3.0"]))"#;
+        let spec: StudySpec = parse_ron(text, "s.ron").unwrap_or_else(|e| panic!("{e}"));
+        let cases = cases(&spec, "s.ron", &[]).unwrap();
+        let e = fallback_cases(&spec, "s.ron", text, &cases).unwrap_err();
+        assert!(e.to_string().contains("`a_x__f` is also a case's"), "{e}");
+        assert_eq!(e.line, 3);
+    }
+
+    fn spec_without_fallback() -> StudySpec {
+        spec("OneAtATime", r#""1.3", "0.9""#)
+    }
+
+    #[test]
+    fn locate_finds_a_field_not_a_path_containing_its_name() {
+        let text = "Study(\n  scenario: \"/x/fallback/a.ron\",\n  fallback : (set: [\"a\"]),\n)";
+        assert_eq!(locate(text, "fallback"), (3, 3));
+        assert_eq!(locate(text, "\"a\""), (3, 21));
+        assert_eq!(locate(text, "missing"), (1, 1));
     }
 
     #[test]

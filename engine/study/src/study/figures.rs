@@ -1,6 +1,7 @@
 //! A study's figures: speed against each error metric (one point per case, the Pareto
 //! front of the completed cases marked) and overlays of time histories, one line per
-//! case. Returns (title, file) pairs for report.md.
+//! case (a fallback run named `<case> (<label>)`). Returns (title, file) pairs for
+//! report.md.
 
 use super::metrics::pareto_front;
 use super::{scales, Row, Study};
@@ -9,6 +10,16 @@ use sph_core::StageRegistry;
 use sph_output::plot::{plot_series, Series, Style};
 use sph_scenario::Scenario;
 use std::path::Path;
+
+/// A row's name in a legend: the case, `(<label>)` for a fallback run, `(stopped)` for
+/// a run that stopped early.
+fn legend(r: &Row) -> String {
+    if r.completed() {
+        r.case.legend()
+    } else {
+        format!("{} (stopped)", r.case.legend())
+    }
+}
 
 /// Draws every figure into `out_dir`.
 pub fn draw(
@@ -64,11 +75,7 @@ pub fn draw(
                 None => points,
             };
             series.push(Series {
-                name: if r.completed() {
-                    r.case.name.clone()
-                } else {
-                    format!("{} (stopped)", r.case.name)
-                },
+                name: legend(r),
                 points,
                 style: Style::Line,
             });
@@ -100,11 +107,7 @@ fn speed_vs_error(path: &Path, title: &str, rows: &[Row], metric: &str) -> Resul
     let mut series: Vec<Series> = rows
         .iter()
         .map(|r| Series {
-            name: if r.completed() {
-                r.case.name.clone()
-            } else {
-                format!("{} (stopped)", r.case.name)
-            },
+            name: legend(r),
             points: vec![point(r)],
             style: Style::Points,
         })

@@ -231,33 +231,84 @@ pub fn study_status(study: &Study, out_dir: &Path) -> Vec<(usize, CaseState)> {
         .collect()
 }
 
-/// The status table: `#`, case, state, detail; then the count per state.
-pub fn status_table(study: &Study, states: &[(usize, CaseState)]) -> String {
+/// The state of each fallback run that is due (its case stopped early), in case order,
+/// numbered as its case. Empty for a study without a fallback.
+pub fn fallback_status(
+    study: &Study,
+    out_dir: &Path,
+    states: &[(usize, CaseState)],
+) -> Vec<(usize, CaseState)> {
+    states
+        .iter()
+        .filter(|(_, st)| matches!(st, CaseState::StoppedEarly { .. }))
+        .filter_map(|(k, _)| {
+            let fb = study.fallbacks.get(k - 1)?;
+            Some((*k, case_state(&out_dir.join(&fb.name), fb)))
+        })
+        .collect()
+}
+
+/// The numbers (1-based) of the cases `engine study --case K` would still run: the
+/// case is not done, or it stopped early and its fallback run is not done.
+pub fn pending_cases(study: &Study, out_dir: &Path) -> Vec<usize> {
+    let states = study_status(study, out_dir);
+    let fallbacks = fallback_status(study, out_dir, &states);
+    states
+        .iter()
+        .filter(|(k, st)| !st.is_done() || fallbacks.iter().any(|(j, f)| j == k && !f.is_done()))
+        .map(|(k, _)| *k)
+        .collect()
+}
+
+/// The status table: `#`, case, state, detail, each due fallback run under its case
+/// (numbered `K+`, as `--case K` runs both); then the count per state.
+pub fn status_table(
+    study: &Study,
+    states: &[(usize, CaseState)],
+    fallbacks: &[(usize, CaseState)],
+) -> String {
     let width = study
         .cases
         .iter()
+        .chain(&study.fallbacks)
         .map(|c| c.name.len())
         .max()
         .unwrap_or(4)
         .max(4);
-    let mut s = format!("{:>3}  {:<width$}  {:<13}  detail\n", "#", "case", "state");
-    for (k, st) in states {
-        let name = &study.cases[k - 1].name;
-        let line = format!("{k:>3}  {name:<width$}  {:<13}  {}", st.name(), st.detail());
+    let mut s = format!("{:>4}  {:<width$}  {:<13}  detail\n", "#", "case", "state");
+    let mut line = |k: String, name: &str, st: &CaseState| {
+        let line = format!("{k:>4}  {name:<width$}  {:<13}  {}", st.name(), st.detail());
         s += line.trim_end();
         s.push('\n');
+    };
+    for (k, st) in states {
+        line(k.to_string(), &study.cases[k - 1].name, st);
+        for (_, f) in fallbacks.iter().filter(|(j, _)| j == k) {
+            line(format!("{k}+"), &study.fallbacks[k - 1].name, f);
+        }
     }
-    let count = |n: &str| states.iter().filter(|(_, st)| st.name() == n).count();
-    let counts: Vec<String> = [
-        "finished",
-        "stopped early",
-        "running",
-        "interrupted",
-        "not started",
-    ]
-    .into_iter()
-    .map(|n| format!("{} {n}", count(n)))
-    .collect();
-    s += &format!("{} cases: {}\n", states.len(), counts.join(", "));
+    let counts = |states: &[(usize, CaseState)]| {
+        let count = |n: &str| states.iter().filter(|(_, st)| st.name() == n).count();
+        [
+            "finished",
+            "stopped early",
+            "running",
+            "interrupted",
+            "not started",
+        ]
+        .into_iter()
+        .map(|n| format!("{} {n}", count(n)))
+        .collect::<Vec<String>>()
+        .join(", ")
+    };
+    s += &format!("{} cases: {}\n", states.len(), counts(states));
+    if let Some(fb) = &study.spec.fallback {
+        s += &format!(
+            "{} fallback run(s) with `{}` (K+: run by --case K after case K stopped early): {}\n",
+            fallbacks.len(),
+            fb.label,
+            counts(fallbacks)
+        );
+    }
     s
 }
