@@ -143,7 +143,8 @@ fn p1_rise_and_plateau_match_buchner() {
         (measured_peak - 0.69).abs() < 0.01,
         "reference peak {measured_peak}"
     );
-    for method in ["shepard"] {
+    {
+        let method = "shepard";
         let p1: Vec<(f64, f64)> =
             series(&out.join("probes.csv"), &format!("P1.{method}.transducer"))
                 .iter()
