@@ -5,10 +5,11 @@
 //! file.
 
 use glam::DVec2;
+use sph_core::checkpoint::read_latest;
 use sph_core::components::{ParticleId, Position};
 use sph_core::world::Particles;
 use sph_core::Sim;
-use sph_run::runner::{run_keeping_state, RunOptions};
+use sph_run::runner::{run, run_keeping_state, RunOptions};
 use sph_scenario::Scenario;
 use sph_tests::stability::quiet;
 use sph_tests::support::{load, temp_out};
@@ -173,15 +174,22 @@ fn still_free_surface_stays() {
     );
 }
 
-/// A coarse dam break with shifting, on one thread and two: bit-identical particles.
-#[test]
-fn shifting_is_deterministic() {
+/// The dam break (scenarios/dam_break.ron) with `Shifting()` after Integrate, coarse
+/// (40 particles across, 0.3 s): its text and overrides.
+fn dam_break_shifting() -> (String, Vec<&'static str>) {
     let text = include_str!("../../scenarios/dam_break.ron");
     let marker = "Integrate(courant: 0.25),\n";
     assert_eq!(text.matches(marker).count(), 1);
     let text = text.replacen(marker, &format!("{marker}        Shifting(),\n"), 1);
     let mut overrides = vec!["resolution=ParticlesAcross(40)", "end_time=0.3"];
     overrides.extend(quiet(&text));
+    (text, overrides)
+}
+
+/// A coarse dam break with shifting, on one thread and two: bit-identical particles.
+#[test]
+fn shifting_is_deterministic() {
+    let (text, overrides) = dam_break_shifting();
     let run = |threads: usize| {
         let out = temp_out(&format!("shift-threads{threads}"));
         let opts = RunOptions::quiet(&out, threads);
@@ -200,6 +208,46 @@ fn shifting_is_deterministic() {
     assert_eq!(one.len(), two.len());
     if let Some(k) = (0..one.len()).find(|&k| one[k] != two[k]) {
         panic!("particle {k} ends differently on 1 and 2 threads");
+    }
+}
+
+/// The stage keeps no state: a run with shifting stopped at a checkpoint and resumed
+/// (on one thread) writes byte-identical probes.csv and energy.csv to one never stopped.
+#[test]
+fn a_resumed_run_with_shifting_is_bit_identical() {
+    let (text, overrides) = dam_break_shifting();
+    let scenario = || load(&text, "dam_break_shifting.ron", &overrides);
+    let full = temp_out("shift-full");
+    let summary = run(scenario(), &RunOptions::quiet(&full, 2)).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(summary.status, "completed");
+    let part = temp_out("shift-part");
+    let opts = RunOptions {
+        stop_at: Some(0.15),
+        ..RunOptions::quiet(&part, 2)
+    };
+    let summary = run(scenario(), &opts).unwrap_or_else(|e| panic!("{e}"));
+    assert!(summary.status.starts_with("paused"), "{}", summary.status);
+    let (checkpoint, _) = read_latest(&part).unwrap_or_else(|e| panic!("{e}"));
+    let opts = RunOptions {
+        resume: Some(checkpoint),
+        ..RunOptions::quiet(&part, 1)
+    };
+    let summary = run(scenario(), &opts).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(summary.status, "completed");
+    for f in ["probes.csv", "energy.csv"] {
+        let (a, b) = (std::fs::read(full.join(f)), std::fs::read(part.join(f)));
+        let (a, b) = (
+            a.expect("full run's output"),
+            b.expect("resumed run's output"),
+        );
+        assert!(a.len() > 100, "{f} is nearly empty");
+        assert!(
+            a == b,
+            "{f} differs between the resumed and the uninterrupted run"
+        );
+    }
+    for dir in [full, part] {
+        let _ = std::fs::remove_dir_all(dir);
     }
 }
 
