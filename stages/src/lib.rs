@@ -5,7 +5,7 @@
 //! `GhostWalls` mirror the fluid across the walls, `NeighbourGrid` finds every
 //! particle's neighbours, `Reinitialise` (every N steps) Shepard-filters the density,
 //! `Eos` gives pressures, `Continuity` and `Forces` the rates, `Probe` samples sensors,
-//! `Integrate` advances the state, then `Energy`, `VtkFrames` and `Snapshots` report.
+//! `Integrate` advances the state (`Shifting` may then regularise the positions), then `Energy`, `VtkFrames` and `Snapshots` report.
 
 pub mod continuity;
 pub mod damping_zone;
@@ -20,6 +20,7 @@ pub mod probe;
 pub(crate) mod rates;
 pub mod reinitialise;
 pub mod scan;
+pub mod shifting;
 pub mod snapshots;
 pub mod sort_particles;
 pub mod terms;
@@ -40,6 +41,7 @@ pub fn register_standard(registry: &mut StageRegistry) {
     probe::register(registry);
     integrate::register(registry);
     damping_zone::register(registry);
+    shifting::register(registry);
     energy::register(registry);
     vtk_frames::register(registry);
     snapshots::register(registry);
