@@ -62,16 +62,27 @@ pub(crate) fn power(sim: &mut Sim, terms: &RateTerms) -> Result<f64, StepError> 
             let pass =
                 Pass::new(&eom, k, records).map_err(|e| StepError::Internal(e.to_string()))?;
             Ok::<f64, StepError>(sum_fixed(n, |i| {
-                let ghosts: Vec<u32> = nb
-                    .of(i)
-                    .iter()
-                    .copied()
-                    .filter(|&j| j as usize >= n)
-                    .collect();
-                if ghosts.is_empty() {
+                // Most particles have no ghost neighbour: test before gathering, and
+                // gather into a stack buffer (a list longer than it, which no kernel
+                // support holds at the shipped h/ds, goes to the heap).
+                let list = nb.of(i);
+                if !list.iter().any(|&j| j as usize >= n) {
                     return 0.0;
                 }
-                let s = pass.sum(i, &ghosts);
+                let mut stack = [0u32; 128];
+                let mut heap = Vec::new();
+                let ghosts: &[u32] = if list.len() <= stack.len() {
+                    let mut k = 0;
+                    for &j in list.iter().filter(|&&j| j as usize >= n) {
+                        stack[k] = j;
+                        k += 1;
+                    }
+                    &stack[..k]
+                } else {
+                    heap.extend(list.iter().copied().filter(|&j| j as usize >= n));
+                    &heap
+                };
+                let s = pass.sum(i, ghosts);
                 let r = rho[i].0;
                 // A density diffusion's share of the ghost pairs is booked apart
                 // (`vocab::DiffusionPower`), so it is taken out here.
