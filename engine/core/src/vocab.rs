@@ -16,6 +16,8 @@
 //!   asked for by `Energy` and filled in by `Forces`.
 //! - [`WallPower`]: the rate of work the walls do on the fluid through the ghosts,
 //!   asked for by `Energy` and filled in by `Forces`.
+//! - [`GuardPower`]: the energy the safeguards (reflections, density floor) add,
+//!   asked for by `Energy` and filled in by `Integrate`.
 //! - [`Guarded`]: per fluid particle, which safeguards have acted on it (`Integrate`
 //!   sets, `Probe` reads).
 //! - [`ArtificialViscosity`]: the viscosity coefficients the momentum stage exposes
@@ -278,6 +280,17 @@ pub struct DensityGradients(pub Vec<glam::DVec2>);
 #[derive(Debug, Default, Clone, Copy)]
 pub struct DiffusionPower {
     /// Rate of internal-energy change this step [W per metre of depth].
+    pub power: f64,
+}
+
+/// The energy the safeguards outside the model add to the fluid (wall reflections, the
+/// density floor, densities restored on reflection): the integrator stores the change
+/// of kinetic + potential + internal energy its guards made this step, divided by the
+/// step, when a stage that reports energy has asked for it (by inserting it), so that
+/// energy.csv books it apart from the flow (docs/physics.md, "Energy budget").
+#[derive(Debug, Default, Clone, Copy)]
+pub struct GuardPower {
+    /// The guards' energy change this step over the step [W per metre of depth].
     pub power: f64,
 }
 
