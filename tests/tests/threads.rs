@@ -46,6 +46,8 @@ shipped! {
         ["resolution=Spacing(0.05)", "end_time=0.6"];
     hydrostatic_is_deterministic: "hydrostatic.ron",
         ["resolution=Spacing(0.05)", "end_time=0.3"];
+    sloshing_dfsph_is_deterministic: "sloshing_dfsph.ron",
+        ["resolution=ParticlesAcross(60)", "end_time=0.6", "tank.motion.ramp=0.1"];
     sloshing_is_deterministic: "sloshing.ron",
         ["resolution=ParticlesAcross(60)", "end_time=0.4", "tank.motion.ramp=0.1"];
     sloshing_paper_is_deterministic: "sloshing_paper.ron",
