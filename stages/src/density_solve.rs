@@ -187,16 +187,9 @@ impl Stage for DensitySolve {
                     .for_each(|(k, v)| v.0 += dt * mirror.apply(k, a[source[k].source as usize].0));
             }
         }
-        let factors = sim.resources.take::<DfsphFactors>().unwrap_or_default();
-        let solved = self.jacobi.solve(
-            sim,
-            dt,
-            Target::Density,
-            self.limits,
-            &factors.alpha,
-            &factors.ghost_offset,
-        );
-        sim.resources.insert(factors);
+        let solved = self
+            .jacobi
+            .solve_with_factors(sim, dt, Target::Density, self.limits, true);
         let outcome = solved?;
         let acc: &[DVec2] = &self.jacobi.acc;
         if let Some(fluid) = archetype::<Fluid>(&sim.world) {

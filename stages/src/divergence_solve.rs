@@ -109,18 +109,10 @@ impl Stage for DivergenceSolve {
         // runs.
         self.kept.clear();
         self.kept.extend_from_slice(&column_mut::<Pressure>(fluid)?);
-        let factors = sim.resources.take::<DfsphFactors>().unwrap_or_default();
         // The carries are hydrostatic pressure, not part of this solve's pressure.
-        let zeros = vec![0.0; factors.ghost_offset.len()];
-        let solved = self.jacobi.solve(
-            sim,
-            dt,
-            Target::Divergence,
-            self.limits,
-            &factors.alpha,
-            &zeros,
-        );
-        sim.resources.insert(factors);
+        let solved =
+            self.jacobi
+                .solve_with_factors(sim, dt, Target::Divergence, self.limits, false);
         if let Some(fluid) = archetype::<Fluid>(&sim.world) {
             column_mut::<Pressure>(fluid)?.copy_from_slice(&self.kept);
         }

@@ -41,7 +41,7 @@ use sph_core::kernel::Kernel;
 use sph_core::pair::{with_records, EquationsOfMotion, Fields, PairTerm, Pass, RateSums};
 use sph_core::sim::Sim;
 use sph_core::stage::StepError;
-use sph_core::vocab::{GhostReflections, Neighbours};
+use sph_core::vocab::{DfsphFactors, GhostReflections, Neighbours};
 use sph_core::with_kernel;
 use sph_core::world::{archetype, column, column_mut, sum_fixed};
 
@@ -93,6 +93,27 @@ pub(crate) struct Jacobi {
 }
 
 impl Jacobi {
+    /// [`Jacobi::solve`] with the step's `DfsphFactors`: the factors, and the ghosts'
+    /// pressure carries if `carry` (else none).
+    pub(crate) fn solve_with_factors(
+        &mut self,
+        sim: &mut Sim,
+        dt: f64,
+        target: Target,
+        limits: Limits,
+        carry: bool,
+    ) -> Result<Outcome, StepError> {
+        let factors = sim.resources.take::<DfsphFactors>().unwrap_or_default();
+        let zeros = match carry {
+            true => Vec::new(),
+            false => vec![0.0; factors.ghost_offset.len()],
+        };
+        let offsets = if carry { &factors.ghost_offset } else { &zeros };
+        let solved = self.solve(sim, dt, target, limits, &factors.alpha, offsets);
+        sim.resources.insert(factors);
+        solved
+    }
+
     /// Solves for the pressures in the `Pressure` column, starting from the fluid's
     /// pressures there (a warm start; zeros for none), and leaves the corrected
     /// velocities in `Velocity` (fluid and ghosts) and the final pressure acceleration
