@@ -415,28 +415,7 @@ impl Integrate {
         rho: &mut Density,
         rh: &mut HalfDensity,
     ) -> bool {
-        let mut hit = false;
-        let (lines, walls) = (self.walls.lines(), self.walls.now());
-        let mut bounce = |k: usize, x: &mut Position| {
-            let (d, n) = (lines[k].distance(x.0), lines[k].normal);
-            let vw = walls[k].velocity_at(x.0 - d * n);
-            x.0 -= 2.0 * d * n;
-            v.0 -= 2.0 * (v.0 - vw).dot(n).min(0.0) * n;
-            vh.0 -= 2.0 * (vh.0 - vw).dot(n).min(0.0) * n;
-            hit = true;
-        };
-        for (k, line) in lines.iter().enumerate() {
-            if line.behind(x.0) {
-                bounce(k, x);
-            }
-        }
-        // Out through a corner: behind both lines but alongside neither wall.
-        for c in self.walls.corners() {
-            if self.walls.past_corner(c, x.0, reach) {
-                bounce(c.first, x);
-                bounce(c.second, x);
-            }
-        }
+        let hit = self.walls.reflect(reach, &mut x.0, [&mut v.0, &mut vh.0]);
         if hit {
             rho.0 = rho.0.max(floor);
             rh.0 = rh.0.max(floor);

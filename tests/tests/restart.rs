@@ -12,6 +12,7 @@ use std::path::{Path, PathBuf};
 
 const WAVE: &str = include_str!("../../scenarios/wave_maker.ron");
 const SLOSHING: &str = include_str!("../../scenarios/sloshing.ron");
+const DAM_BREAK_DFSPH: &str = include_str!("../../scenarios/dam_break_dfsph.ron");
 
 /// A coarse wave maker: 630 particles, the piston moving from the start, particles
 /// sorted every 7 steps (so a checkpoint falls between two sorts).
@@ -35,6 +36,24 @@ const SLOSHING_COARSE: [&str; 6] = [
     "pipeline.energy.plots=false",
     "tank.motion.ramp=0.0",
 ];
+
+/// A coarse DFSPH dam break: 800 particles sorted every 7 steps, to the first impact.
+const DFSPH_COARSE: [&str; 6] = [
+    "resolution=ParticlesAcross(40)",
+    "pipeline.neighbour_grid.sort_every=7",
+    "end_time=0.6",
+    "pipeline.vtk_frames.interval=0.25",
+    "pipeline.probe.plots=false",
+    "pipeline.snapshots.times=[]",
+];
+
+fn dfsph() -> Scenario {
+    load(
+        DAM_BREAK_DFSPH,
+        "scenarios/dam_break_dfsph.ron",
+        &DFSPH_COARSE,
+    )
+}
 
 fn wave() -> Scenario {
     load(WAVE, "scenarios/wave_maker.ron", &WAVE_COARSE)
@@ -88,7 +107,16 @@ fn resume(scenario: Scenario, out: &Path, threads: usize) -> Vec<String> {
 
 /// The two runs' series and frame indexes are byte-identical; removes both folders.
 fn same_outputs_then_clean(a: PathBuf, b: PathBuf) {
-    for f in ["probes.csv", "energy.csv", "frames.pvd", "walls.pvd"] {
+    same_files_then_clean(
+        a,
+        b,
+        &["probes.csv", "energy.csv", "frames.pvd", "walls.pvd"],
+    );
+}
+
+/// The two runs' `files` are byte-identical; removes both folders.
+fn same_files_then_clean(a: PathBuf, b: PathBuf, files: &[&str]) {
+    for &f in files {
         let (x, y) = (std::fs::read(a.join(f)), std::fs::read(b.join(f)));
         let (x, y) = (x.unwrap(), y.unwrap_or_else(|e| panic!("{f}: {e}")));
         assert!(x.len() > 100, "{f} is nearly empty");
@@ -97,6 +125,23 @@ fn same_outputs_then_clean(a: PathBuf, b: PathBuf) {
     for dir in [a, b] {
         let _ = std::fs::remove_dir_all(dir);
     }
+}
+
+/// The DFSPH pipeline keeps its warm start in the checkpointed pressures, and the
+/// solves' reports continue: resumed, it writes what an uninterrupted run writes,
+/// the solves' iterations and errors included.
+#[test]
+fn a_resumed_dfsph_run_is_bit_identical() {
+    let full = uninterrupted(dfsph(), "restart-dfsph-full");
+    let part = stopped(dfsph(), "restart-dfsph-part", Some(0.1), 0.35);
+    resume(dfsph(), &part, 1);
+    let files = [
+        "probes.csv",
+        "density_solve.csv",
+        "divergence_solve.csv",
+        "frames.pvd",
+    ];
+    same_files_then_clean(full, part, &files);
 }
 
 #[test]
