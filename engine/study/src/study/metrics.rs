@@ -213,7 +213,7 @@ fn whole_periods_end(series: &[(f64, f64)], from: f64, period: f64) -> Option<(u
 
 /// First harmonic of a forced response over the whole periods from `from`: the least-
 /// squares fit y = a sin(w t + phi) + c with w = 2 pi / period (see
-/// [`crate::sweep::fit_harmonic`]), as (a, lag) where lag = `forcing_phase` - phi in
+/// [`crate::waves::harmonic`]), as (a, lag) where lag = `forcing_phase` - phi in
 /// degrees, wrapped into (-180, 180]: how far the response trails a forcing
 /// A sin(w t + forcing_phase). NaNs if less than one whole period is available.
 pub fn forced_harmonic(
@@ -225,12 +225,9 @@ pub fn forced_harmonic(
     let Some((_, to)) = whole_periods_end(series, from, period) else {
         return (f64::NAN, f64::NAN);
     };
-    let (t, y): (Vec<f64>, Vec<f64>) = series
-        .iter()
-        .filter(|p| p.0 >= from && p.0 <= to)
-        .copied()
-        .unzip();
-    match crate::sweep::fit_harmonic(&t, &y, 2.0 * std::f64::consts::PI / period) {
+    let (t, y): (Vec<f64>, Vec<f64>) = series.iter().copied().unzip();
+    let omega = 2.0 * std::f64::consts::PI / period;
+    match crate::waves::harmonic(&t, &y, omega, from, to) {
         Some((a, phi)) => {
             let lag = (forcing_phase_deg - phi.to_degrees()).rem_euclid(360.0);
             (a, if lag > 180.0 { lag - 360.0 } else { lag })
