@@ -11,14 +11,15 @@
 //!
 //!   D(k) = c_0^2 A^2 s s^T + 2 (p/rho) A S(k),
 //!   s(k) = sum_j sin(k.x_j) grad W(x_j),
-//!   S(k) = sum_j (1 - cos k.x_j) [W'' r^ r^ + (W'/r)(I - r^ r^)](x_j),
+//!   S(k) = sum_j (1 - cos k.x_j) H(x_j),  H = W'' r^ r^ + (W'/r) (I - r^ r^),
 //!
 //! the first term the continuity equation's compression read through the equation of
 //! state, the second the pair potential's curvature. A wave that does not compress
 //! (s.u = 0: rows sliding past each other) sees only S; if S has a negative direction
 //! there, the wave grows as exp(sigma t), sigma = sqrt(-lambda_min(D)), from round-off.
-//! The lattice sum runs over every neighbour inside the kernel's support; walls, the
-//! pressure gradient and the viscosity are left out (they do not enter the sign).
+//! The lattice sum runs over every neighbour inside the kernel's support. Walls, the
+//! pressure's change with depth and the viscosity are left out: the viscosity slows a
+//! growing wave but cannot stop it, and the fine 20 s runs check the rest.
 
 use glam::{DMat2, DVec2};
 use sph_core::kernel::{dw_dr, KernelKind};
