@@ -17,7 +17,7 @@
 //! fixed) and recomputes a_p and v. Pressures only grow within a solve, and only
 //! compression counts (a free surface is not pulled back: its particles sum to less
 //! than rho_0); the solve starts from a fraction of the previous step's pressures (the
-//! warm start) so that it never starts above what the step needs: a full warm start
+//! warm start; where r_i is above minus the tolerance) so that it never starts above what the step needs: a full warm start
 //! pushed still water up every other step, since an expansion the pressure overshot
 //! into is left to gravity. The relaxation omega = 0.5 is that of implicit
 //! incompressible SPH: with omega = 1 the iteration diverged on still water (the
@@ -168,6 +168,11 @@ impl Jacobi {
         if warm > 0.0 {
             self.divergence(sim)?;
         }
+        // "Compressed" includes a particle within the solve's tolerance of rest density:
+        // inside still water rho_i = rho_0 to round-off, and a threshold at exactly 0
+        // let the order of the sums decide which particles kept their pressure (the
+        // still tank then differed by 1 % from one summation order to another).
+        let at_rest = -limits.tolerance * rho0;
         if let Some(fluid) = archetype::<Fluid>(&sim.world) {
             let rho = column::<Density>(fluid)?;
             let rate = &self.rate;
@@ -176,7 +181,7 @@ impl Jacobi {
                 .enumerate()
                 .for_each(|(i, p)| {
                     let compressed =
-                        warm > 0.0 && residual(target, dt, rho0, rho[i].0, rate[i]) > 0.0;
+                        warm > 0.0 && residual(target, dt, rho0, rho[i].0, rate[i]) > at_rest;
                     p.0 = if compressed { warm * p.0 } else { 0.0 };
                 });
         }
