@@ -19,9 +19,9 @@
 //! not pulled back (its particles sum to less than rho_0, r_i < 0, so p_i = 0), and a
 //! pressure above what the step needs is lowered. The earlier rule raised pressures by
 //! omega alpha_i max(r_i, 0) / dt^2 only, so an overshoot stayed for the rest of the
-//! solve: on still water a column-wise shear mode grew from it to 0.03-0.08 m/s within
-//! a second; with the projection the water stays below 0.001 m/s (docs/validation.md,
-//! "DFSPH"). The solve starts from a fraction of the previous step's pressures (the
+//! solve: on still water a column-wise shear mode grew to 0.03-0.08 m/s within a
+//! second; with the projection the water stays below 0.0003 m/s until 2.4 s, when the
+//! mode starts to grow from this smaller seed (docs/validation.md, "DFSPH"). The solve starts from a fraction of the previous step's pressures (the
 //! warm start, applied everywhere: the projected update lowers what the step does not
 //! need), by default half (SPlisHSPlasH's DFSPH starts from the previous step's
 //! pressure increment, which in a steady state is half the pressure). A full warm
