@@ -32,8 +32,8 @@ fn dfsph_still_water_holds_hydrostatic_pressure_at_rest_density() {
     // the tolerance. (The kernel's discrete gradient moment, 0.997 for
     // Wendland at h/ds = 1.5, biases the equilibrium by ~0.3 %.) The layers, not each
     // particle: the Jacobi solve stops at a mean density error of 0.1 %, which leaves
-    // each particle's pressure scattered about the profile (RMS ~1 %, the worst few 7-12 %
-    // of rho_0 g H, docs/validation.md, "DFSPH"); that scatter is checked below 2 %.
+    // each particle's pressure scattered about the profile (RMS ~1 %, the worst 2 % of
+    // rho_0 g H, docs/validation.md, "DFSPH"); that scatter is checked below 2 %.
     let particles = Particles::of(&sim.world).expect("fluid");
     let (x, p, rho) = (
         particles.fluid::<Position>().unwrap(),
@@ -94,9 +94,9 @@ fn dfsph_still_water_holds_hydrostatic_pressure_at_rest_density() {
 
     // The bottom and side sensors after the start-up (0.3 s): the time mean within 1 %
     // of rho_0 g H by every method; each sample within 2 %, since the sensors also
-    // read the particles' scatter and the shear mode below (Methods I and III average it
-    // over a few particles, Method II reads the nearest one; the samples stray up to
-    // 1-1.5 %, docs/validation.md, "DFSPH").
+    // read the particles' scatter (Methods I and III average it over a few particles,
+    // Method II reads the nearest one; the samples stray up to 1-1.5 %,
+    // docs/validation.md, "DFSPH").
     let probes = out.join("probes.csv");
     for (sensor, depth) in [("bottom", h), ("side", h - 0.3)] {
         for method in ["shepard", "nearest", "averaged"] {
@@ -125,8 +125,9 @@ fn dfsph_still_water_holds_hydrostatic_pressure_at_rest_density() {
     // Speeds: the start-up transient (the lattice settling under the solved pressure)
     // decays tenfold within 0.2 s, and the water stays still to 5 % of sqrt(g H) after
     // it. (Not 1 % as for WCSPH: a column-wise shear mode, divergence-free and so
-    // invisible to both solves, grows to 1-3 % of sqrt(g H) within a second; the
-    // artificial viscosity, which acts on approaching pairs only, hardly damps it:
+    // invisible to both solves, grows and saturates at about 1 % of sqrt(g H): with the
+    // solves' projected update from 2.4 s on (the speed below 0.0003 m/s until then),
+    // with the earlier raise-only update within the first second, at 1-3 %;
     // docs/validation.md, "DFSPH".)
     let speed = series(&probes, "max_speed");
     let peak = |from: f64, to: f64| {
