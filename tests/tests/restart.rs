@@ -5,13 +5,15 @@
 //! and absurd sizes are refused before the run with a message naming the culprit.
 
 use sph_core::checkpoint::{read_latest, LATEST, PREVIOUS, TEMPORARY};
-use sph_run::runner::{run, RunOptions};
+use sph_core::vocab::Neighbours;
+use sph_run::runner::{run, run_keeping_state, RunOptions};
 use sph_scenario::Scenario;
 use sph_tests::support::{load, temp_out};
 use std::path::{Path, PathBuf};
 
 const WAVE: &str = include_str!("../../scenarios/wave_maker.ron");
 const SLOSHING: &str = include_str!("../../scenarios/sloshing.ron");
+const DAM: &str = include_str!("../../scenarios/dam_break.ron");
 
 /// A coarse wave maker: 630 particles, the piston moving from the start, particles
 /// sorted every 7 steps (so a checkpoint falls between two sorts).
@@ -282,4 +284,50 @@ fn unwritable_outputs_are_reported_with_the_file_name(
     assert!(err.contains(TEMPORARY) && err.contains(reason), "{err}");
     assert!(!out.join(LATEST).exists());
     let _ = std::fs::remove_dir_all(&out);
+}
+
+/// A dam break whose neighbour lists last several steps (the skin), stopped while a
+/// list is in use and resumed: the resumed run rebuilds the same lists from the
+/// checkpoint and keeps them as long, so its outputs are byte-identical.
+#[test]
+fn a_dam_break_resumed_in_the_middle_of_a_neighbour_list_is_bit_identical() {
+    let coarse = [
+        "resolution=ParticlesAcross(30)",
+        "end_time=0.3",
+        "pipeline.vtk_frames.interval=0.1",
+        "pipeline.probe.plots=false",
+        "pipeline.energy.plots=false",
+    ];
+    let dam = || load(DAM, "scenarios/dam_break.ron", &coarse);
+    let full = uninterrupted(dam(), "restart-dam-full");
+    let part = temp_out("restart-dam-part");
+    let opts = RunOptions {
+        stop_at: Some(0.13),
+        ..options(&part, 2)
+    };
+    let (summary, sim) = run_keeping_state(dam(), &opts).unwrap_or_else(|e| panic!("{e}"));
+    assert!(summary.status.starts_with("paused"), "{}", summary.status);
+    let nb = sim.resources.get::<Neighbours>().expect("neighbour lists");
+    assert!(nb.skin > 0.0);
+    assert!(
+        nb.calls > 3 * nb.builds,
+        "the lists should last several steps: {} steps, {} builds",
+        nb.calls,
+        nb.builds
+    );
+    assert!(
+        nb.age > 0,
+        "the stop should fall in the middle of a list's life"
+    );
+    drop(sim);
+    resume(dam(), &part, 1);
+    for f in ["probes.csv", "energy.csv", "frames.pvd"] {
+        let (x, y) = (std::fs::read(full.join(f)), std::fs::read(part.join(f)));
+        let (x, y) = (x.unwrap(), y.unwrap_or_else(|e| panic!("{f}: {e}")));
+        assert!(x.len() > 100, "{f} is nearly empty");
+        assert!(x == y, "{f} differs between the two runs");
+    }
+    for dir in [full, part] {
+        let _ = std::fs::remove_dir_all(dir);
+    }
 }
