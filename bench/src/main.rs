@@ -7,7 +7,7 @@
 //! break's 3.22 m tank; the geometry of tests/tests/dam_break.rs) in both engines at
 //! the same particle spacing and to the same physical end time, and prints wall time
 //! to solution and the surge-front error against Martin & Moyce (a = 2.25 in series,
-//! tests/data). What is not like for like is listed in `peer.md` and
+//! tests/data), for our WCSPH and DFSPH pipelines. What is not like for like is listed in `peer.md` and
 //! docs/performance.md.
 
 use clap::{Parser, Subcommand};
@@ -58,6 +58,9 @@ struct PeerArgs {
     /// The scenario our engine runs (the column is set by overrides).
     #[arg(long, default_value = "scenarios/dam_break.ron")]
     scenario: PathBuf,
+    /// The same with our DFSPH pipeline (a third row).
+    #[arg(long, default_value = "scenarios/dam_break_dfsph.ron")]
+    dfsph_scenario: PathBuf,
     /// Folder for peer.md.
     #[arg(long, default_value = "out/bench")]
     out: PathBuf,
@@ -194,7 +197,7 @@ fn peer(args: &PeerArgs) -> Result<(), String> {
         child: None,
     };
     let mut table = format!(
-        "| particles | ds [mm] | engine | steps | wall to t [s] | wall ratio (salva2d / ours) | mean front error | at the last data point | mean front error, gate delay {GATE_DELAY} | at the last data point, gate delay |\n|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|\n",
+        "| particles | ds [mm] | engine | steps | solver iterations per step (density + divergence) | wall to t [s] | wall ratio (salva2d / ours) | mean front error | at the last data point | mean front error, gate delay {GATE_DELAY} | at the last data point, gate delay |\n|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for size in &args.sizes {
         let n = parse_count(size)?;
@@ -202,46 +205,69 @@ fn peer(args: &PeerArgs) -> Result<(), String> {
         let ds = A / across as f64;
         let blocks = format!("fluid_blocks=[(min: (0.0, 0.0), size: ({A}, {}))]", 2.0 * A);
         let res = format!("resolution=ParticlesAcross({across})");
-        let ours: Measurement = run_child(
-            Case {
-                particles: n,
-                threads: args.threads,
-                steps: 0,
-                end_time: args.end_time,
-            },
-            &bench,
-            &[&blocks, &res, "pipeline.snapshots.times=[]"],
-            &format!("peer-{size}"),
-        )?;
+        let overrides = [blocks.as_str(), res.as_str(), "pipeline.snapshots.times=[]"];
+        let case = Case {
+            particles: n,
+            threads: args.threads,
+            steps: 0,
+            end_time: args.end_time,
+        };
+        let ours: Measurement = run_child(case, &bench, &overrides, &format!("peer-{size}"))?;
         eprintln!(
             "ours: {} particles to t = {} s in {:.2} s ({} steps)",
             ours.particles, ours.simulated_time, ours.wall_seconds, ours.steps
+        );
+        let dfsph_bench = BenchArgs {
+            scenario: args.dfsph_scenario.clone(),
+            ..bench.clone()
+        };
+        let dfsph: Measurement = run_child(
+            case,
+            &dfsph_bench,
+            &overrides,
+            &format!("peer-dfsph-{size}"),
+        )?;
+        eprintln!(
+            "ours (DFSPH): {} particles to t = {} s in {:.2} s ({} steps)",
+            dfsph.particles, dfsph.simulated_time, dfsph.wall_seconds, dfsph.steps
         );
         let theirs = run_salva(across, args.threads, args.end_time)?;
         eprintln!(
             "salva2d: {} particles to t = {} s in {:.2} s ({} substeps)",
             theirs.particles, args.end_time, theirs.wall, theirs.steps
         );
-        let (e_ours, t_last, last_ours) = front_error(&ours.front, args.end_time, 0.0);
         let (e_salva, _, last_salva) = front_error(&theirs.front, args.end_time, 0.0);
-        let (d_ours, _, dlast_ours) = front_error(&ours.front, args.end_time, GATE_DELAY);
         let (d_salva, _, dlast_salva) = front_error(&theirs.front, args.end_time, GATE_DELAY);
-        let ratio = theirs.wall / ours.wall_seconds;
+        for (m, engine) in [(&ours, "ours (WCSPH, f64)"), (&dfsph, "ours (DFSPH, f64)")] {
+            let (e, t_last, last) = front_error(&m.front, args.end_time, 0.0);
+            let (d, _, dlast) = front_error(&m.front, args.end_time, GATE_DELAY);
+            let ratio = theirs.wall / m.wall_seconds;
+            let per_step =
+                |k: &str| m.diagnostics.get(k).copied().unwrap_or(0.0) / m.steps.max(1) as f64;
+            let iterations = match m.diagnostics.contains_key("density_solve_iterations") {
+                true => format!(
+                    "{:.1} + {:.1}",
+                    per_step("density_solve_iterations"),
+                    per_step("divergence_solve_iterations")
+                ),
+                false => "".into(),
+            };
+            let _ = writeln!(
+                table,
+                "| {} | {:.2} | {engine} | {} | {iterations} | {:.2} | {ratio:.2} | {:.1} % | {:+.1} % (T = {t_last:.2}) | {:.1} % | {:+.1} % |",
+                m.particles,
+                1e3 * ds,
+                m.steps,
+                m.wall_seconds,
+                100.0 * e,
+                100.0 * last,
+                100.0 * d,
+                100.0 * dlast
+            );
+        }
         let _ = writeln!(
             table,
-            "| {} | {:.2} | ours (WCSPH, f64) | {} | {:.2} | {ratio:.2} | {:.1} % | {:+.1} % (T = {t_last:.2}) | {:.1} % | {:+.1} % |",
-            ours.particles,
-            1e3 * ds,
-            ours.steps,
-            ours.wall_seconds,
-            100.0 * e_ours,
-            100.0 * last_ours,
-            100.0 * d_ours,
-            100.0 * dlast_ours
-        );
-        let _ = writeln!(
-            table,
-            "| {} | {:.2} | salva2d 0.11 (DFSPH, f32) | {} | {:.2} | | {:.1} % | {:+.1} % | {:.1} % | {:+.1} % |",
+            "| {} | {:.2} | salva2d 0.11 (DFSPH, f32) | {} | | {:.2} | | {:.1} % | {:+.1} % | {:.1} % | {:+.1} % |",
             theirs.particles,
             1e3 * ds,
             theirs.steps,
@@ -253,7 +279,7 @@ fn peer(args: &PeerArgs) -> Result<(), String> {
         );
     }
     let md = format!(
-        "# Peer comparison: salva2d\n\nMartin & Moyce column (a = {A} m, n^2 = 2) in the {} m x {} m tank, to t = {} s on {} thread(s). Front error: |Z/Z_data - 1| averaged over the data points with 1 <= T <= T(t_end) (a = 2.25 in series; T = t sqrt(2g/a)), without a start delay and with the simulation delayed by the gate's {GATE_DELAY} (T units; the delay tests/tests/dam_break.rs applies, after Lethe).\n\n{table}\nNot like for like: salva2d is DFSPH (incompressible, larger steps; 'steps' counts its substeps), f32 only, with Akinci boundary particles and its own artificial viscosity (coefficient 0.03, not the same formula); ours is WCSPH in f64 with mirrored ghosts, Shepard filtering every step and artificial pressure, and its time includes probes and outputs at default rates.\n",
+        "# Peer comparison: salva2d\n\nMartin & Moyce column (a = {A} m, n^2 = 2) in the {} m x {} m tank, to t = {} s on {} thread(s). Front error: |Z/Z_data - 1| averaged over the data points with 1 <= T <= T(t_end) (a = 2.25 in series; T = t sqrt(2g/a)), without a start delay and with the simulation delayed by the gate's {GATE_DELAY} (T units; the delay tests/tests/dam_break.rs applies, after Lethe).\n\n{table}\nNot like for like: salva2d is DFSPH (incompressible, larger steps; 'steps' counts its substeps), f32 only, with Akinci boundary particles and its own artificial viscosity (coefficient 0.03, not the same formula); ours is WCSPH in f64 with mirrored ghosts and density diffusion (scenarios/dam_break.ron), or DFSPH in f64 with mirrored ghosts and a Jacobi solve (scenarios/dam_break_dfsph.ron), and its time includes probes and outputs at default rates.\n",
         TANK.0, TANK.1, args.end_time, args.threads
     );
     std::fs::write(args.out.join("peer.md"), &md).map_err(|e| e.to_string())?;

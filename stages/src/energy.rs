@@ -2,7 +2,8 @@
 //! -sum m g.x (zero at y = 0), internal sum m e(rho) with e the Tait internal energy;
 //! the energy dissipated (`viscous`, the artificial and laminar viscosities) and the work
 //! done on the fluid (`wall_work`, by the walls through the ghosts, moving or not;
-//! `diffusion`, the internal energy a density-diffusion term adds or takes), each
+//! `diffusion`, the internal energy a density-diffusion term adds or takes; `guards`,
+//! what the wall reflections and the density floor add), each
 //! the time integral of the rate the forces stage reported; `total` = kinetic +
 //! potential + internal + dissipated, and `closure_error` = total - (total at t = 0 +
 //! work in), which is zero for an energy-conserving scheme up to the time-integration
@@ -20,7 +21,7 @@ use sph_core::contract::Access;
 use sph_core::series::SeriesWriter;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{DiffusionPower, ViscousDissipation, WallPower};
+use sph_core::vocab::{DiffusionPower, GuardPower, ViscousDissipation, WallPower};
 use sph_core::world::{sum_fixed, Particles};
 use sph_core::StageRegistry;
 use sph_output::SeriesPlot;
@@ -46,7 +47,7 @@ struct Entry {
 }
 
 /// The accumulated entries, in column order (and checkpoint order).
-const BUDGET: [Entry; 3] = [
+const BUDGET: [Entry; 4] = [
     Entry {
         column: "viscous",
         kind: Kind::Dissipated,
@@ -75,6 +76,15 @@ const BUDGET: [Entry; 3] = [
                 .map_or(0.0, |d| d.power)
         },
         ask: |sim| sim.resources.insert(DiffusionPower::default()),
+    },
+    Entry {
+        // What the safeguards outside the model add: wall reflections (off a moving
+        // wall they change the kinetic energy), the density floor and densities
+        // restored on reflection (the internal energy); `Integrate` reports it.
+        column: "guards",
+        kind: Kind::WorkIn,
+        rate: |sim| sim.resources.get::<GuardPower>().map_or(0.0, |g| g.power),
+        ask: |sim| sim.resources.insert(GuardPower::default()),
     },
 ];
 

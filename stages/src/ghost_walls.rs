@@ -33,7 +33,8 @@ use sph_core::contract::Access;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{
-    ghost_density, GhostSettings, ListPlan, MirrorWall, Neighbours, WallPose, Walls,
+    ghost_density, GhostReflections, GhostSettings, ListPlan, MirrorWall, Neighbours, WallPose,
+    Walls,
 };
 use sph_core::walls::WallLine;
 use sph_core::world::{archetype, column, column_mut, count};
@@ -233,6 +234,7 @@ impl Stage for GhostWalls {
             .writes::<Ghost>()
             .writes::<MirrorWall>()
             .writes::<GhostSettings>()
+            .writes::<GhostReflections>()
     }
 }
 
@@ -261,6 +263,13 @@ impl GhostWalls {
     fn mirror(&self, sim: &mut Sim, renew: bool) -> Result<(), StepError> {
         let _span = tracing::info_span!("mirror").entered();
         let images = &self.images[..];
+        // Only when a stage asked for them (the DFSPH solves); the walls move with the
+        // tank, so every step.
+        if let Some(r) = sim.resources.get_mut::<GhostReflections>() {
+            let (lines, slip) = (self.walls.lines(), self.params.slip);
+            r.0.clear();
+            r.0.extend(images.iter().map(|img| reflection(lines, img, slip)));
+        }
         let Some(fluid) = archetype::<Fluid>(&sim.world) else {
             return Ok(());
         };
@@ -399,6 +408,32 @@ fn mirror_velocity(line: &WallLine, w: &WallPose, x: DVec2, v: DVec2, slip: Slip
         Slip::FreeSlip => v - 2.0 * (v - vw).dot(n) * n,
         Slip::NoSlip => 2.0 * vw - v,
     }
+}
+
+/// The linear part of a ghost's velocity mirror (see [`GhostReflections`]): the
+/// product of each crossed wall's, I - 2 n n^T for free slip and -I for no slip, the
+/// linear parts of [`mirror_velocity`].
+fn reflection(lines: &[WallLine], img: &Image, slip: Slip) -> [f64; 4] {
+    let mut m = [1.0, 0.0, 0.0, 1.0];
+    for k in std::iter::once(img.first).chain(img.second) {
+        let n = lines[k as usize].normal;
+        let l = match slip {
+            Slip::FreeSlip => [
+                1.0 - 2.0 * n.x * n.x,
+                -2.0 * n.x * n.y,
+                -2.0 * n.y * n.x,
+                1.0 - 2.0 * n.y * n.y,
+            ],
+            Slip::NoSlip => [-1.0, 0.0, 0.0, -1.0],
+        };
+        m = [
+            l[0] * m[0] + l[1] * m[2],
+            l[0] * m[1] + l[1] * m[3],
+            l[2] * m[0] + l[3] * m[2],
+            l[2] * m[1] + l[3] * m[3],
+        ];
+    }
+    m
 }
 
 /// Brings the ghost pool to `needed` entities: spawns the shortfall or despawns the

@@ -12,12 +12,12 @@ use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{get_column, put_column, Dec, Enc};
-use sph_core::components::{Acceleration, Density, DensityRate, Fluid, Position, Velocity};
+use sph_core::components::{Acceleration, Density, DensityRate, Fluid, Mass, Position, Velocity};
 use sph_core::contract::Access;
 use sph_core::sim::{Clock, Sim};
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{BodyPose, Guarded, HalfDensity, HalfVelocity, WallPose, Walls};
-use sph_core::world::{archetype, column_mut, ensure_component};
+use sph_core::vocab::{BodyPose, GuardPower, Guarded, HalfDensity, HalfVelocity, WallPose, Walls};
+use sph_core::world::{archetype, column, column_mut, ensure_component};
 use sph_core::StageRegistry;
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -178,6 +178,7 @@ impl Stage for Integrate {
         let mut vh = column_mut::<HalfVelocity>(fluid)?;
         let mut rh = column_mut::<HalfDensity>(fluid)?;
         let mut guarded = column_mut::<Guarded>(fluid)?;
+        let mass = column::<Mass>(fluid)?;
 
         let ext = tracing::info_span!("time_step").in_scope(|| Extremes::of(&v, acc, rate, &rho));
         if !ext.finite {
@@ -232,11 +233,12 @@ impl Stage for Integrate {
         let (rho0, limit) = (c.eos.rho0, self.params.density_limit);
         let reach = c.support();
         let least = self.params.density_floor.map(|f| f * rho0);
+        let (eos, g) = (c.eos, c.gravity);
         let _span = tracing::info_span!("advance").entered();
         // One pass: kick, drift, reflect at the walls (at their end-of-step place),
         // raise densities to the floor, then check; it returns the reflections, the
-        // floored particles and the lowest offending index.
-        let (reflected, floored, bad) = (
+        // floored particles, the guards' energy change and the lowest offending index.
+        let (reflected, floored, guard_energy, bad) = (
             &mut x[..],
             &mut v[..],
             &mut rho[..],
@@ -245,10 +247,11 @@ impl Stage for Integrate {
             &mut guarded[..],
             acc,
             rate,
+            &mass[..],
         )
             .into_par_iter()
             .enumerate()
-            .map(|(i, (x, v, rho, vh, rh, guarded, a, r))| {
+            .map(|(i, (x, v, rho, vh, rh, guarded, a, r, m))| {
                 let (vhalf, rhalf) = if first_step {
                     (v.0, rho.0)
                 } else {
@@ -259,8 +262,24 @@ impl Stage for Integrate {
                 x.0 += dt * vh.0;
                 v.0 = vh.0 + 0.5 * dt * a.0;
                 rho.0 = rh.0 + 0.5 * dt * r.0;
+                let before = (x.0, v.0, rho.0, vh.0, rh.0);
                 let hit = reflect && self.reflect(floor, reach, x, v, vh, rho, rh);
                 let raised = least.is_some_and(|least| raise_to_floor(least, rho, rh));
+                // The energy a guard added: kinetic + potential + internal after it
+                // acted minus before (a reflection off a moving wall changes the
+                // kinetic energy; the floor and a restored density the internal one).
+                // The half-step velocity and density are the state carried on (the
+                // integer-time ones are predictions from them), so their changes are
+                // what the guard adds for good.
+                let de = if hit || raised {
+                    let e = |x: DVec2, v: DVec2, rho: f64| {
+                        m.0 * (0.5 * v.length_squared() - g.dot(x) + eos.internal_energy(rho))
+                    };
+                    let (v1, rho1) = (before.1 + (vh.0 - before.3), before.2 + (rh.0 - before.4));
+                    fixed_point(e(x.0, v1, rho1) - e(before.0, before.1, before.2))
+                } else {
+                    0
+                };
                 guarded.0 |=
                     ((hit as u8) * Guarded::REFLECTED) | ((raised as u8) * Guarded::FLOORED);
                 let p = x.0;
@@ -270,12 +289,18 @@ impl Stage for Integrate {
                     && p.cmple(hi).all()
                     && (rho.0 / rho0 - 1.0).abs() <= limit
                     && self.walls.crossed(p, reach).is_none();
-                (hit as usize, raised as usize, (!ok).then_some(i))
+                (hit as usize, raised as usize, de, (!ok).then_some(i))
             })
             .reduce(
-                || (0, 0, None),
-                |(h1, f1, b1), (h2, f2, b2)| (h1 + h2, f1 + f2, b1.into_iter().chain(b2).min()),
+                || (0, 0, 0, None),
+                |(h1, f1, e1, b1), (h2, f2, e2, b2)| {
+                    let bad = b1.into_iter().chain(b2).min();
+                    (h1 + h2, f1 + f2, e1.saturating_add(e2), bad)
+                },
             );
+        if let Some(p) = sim.resources.get_mut::<GuardPower>() {
+            p.power = guard_energy as f64 / FIXED_POINT / dt;
+        }
         if reflected > 0 {
             *sim.diagnostics
                 .entry("wall_reflections".into())
@@ -299,6 +324,7 @@ impl Stage for Integrate {
             .reads::<Position>()
             .reads::<Velocity>()
             .reads::<Density>()
+            .reads::<Mass>()
             .reads::<WallPose>()
             .uses::<Acceleration>()
             .uses::<DensityRate>()
@@ -389,33 +415,27 @@ impl Integrate {
         rho: &mut Density,
         rh: &mut HalfDensity,
     ) -> bool {
-        let mut hit = false;
-        let (lines, walls) = (self.walls.lines(), self.walls.now());
-        let mut bounce = |k: usize, x: &mut Position| {
-            let (d, n) = (lines[k].distance(x.0), lines[k].normal);
-            let vw = walls[k].velocity_at(x.0 - d * n);
-            x.0 -= 2.0 * d * n;
-            v.0 -= 2.0 * (v.0 - vw).dot(n).min(0.0) * n;
-            vh.0 -= 2.0 * (vh.0 - vw).dot(n).min(0.0) * n;
-            hit = true;
-        };
-        for (k, line) in lines.iter().enumerate() {
-            if line.behind(x.0) {
-                bounce(k, x);
-            }
-        }
-        // Out through a corner: behind both lines but alongside neither wall.
-        for c in self.walls.corners() {
-            if self.walls.past_corner(c, x.0, reach) {
-                bounce(c.first, x);
-                bounce(c.second, x);
-            }
-        }
+        let hit = self.walls.reflect(reach, &mut x.0, [&mut v.0, &mut vh.0]);
         if hit {
             rho.0 = rho.0.max(floor);
             rh.0 = rh.0.max(floor);
         }
         hit
+    }
+}
+
+/// Units per joule of [`fixed_point`].
+const FIXED_POINT: f64 = (1u64 << 60) as f64;
+
+/// An energy [J/m] as a fixed-point integer (2^-60 J/m, about 1e-18): integer sums do not
+/// depend on the order of the terms, so the guards' energy, summed in whatever order the
+/// parallel reduction takes, is the same for any thread count. Saturates beyond about
+/// 1e20 J/m; a non-finite energy (a particle the check then reports) counts as 0.
+fn fixed_point(e: f64) -> i128 {
+    if e.is_finite() {
+        (e * FIXED_POINT).round() as i128
+    } else {
+        0
     }
 }
 

@@ -1,4 +1,5 @@
-//! The standard WCSPH stages (docs/physics.md). One stage per file; each registers under its
+//! The standard stages (WCSPH, and the DFSPH pipeline's `DfsphFactor`, `DivergenceSolve`,
+//! `DensitySolve`, `Advance`) (docs/physics.md). One stage per file; each registers under its
 //! snake_case name with a typed parameter struct whose fields document their defaults.
 //!
 //! A usual step, in pipeline order:
@@ -7,15 +8,20 @@
 //! `Eos` gives pressures, `Continuity` and `Forces` the rates, `Probe` samples sensors,
 //! `Integrate` advances the state (`Shifting` may then regularise the positions), then `Energy`, `VtkFrames` and `Snapshots` report.
 
+pub mod advance;
 pub mod continuity;
 pub mod damping_zone;
 pub mod density_gradient;
+pub mod density_solve;
+pub mod dfsph_factor;
+pub mod divergence_solve;
 pub mod energy;
 pub mod eos;
 pub mod forces;
 pub mod ghost_walls;
 pub mod integrate;
 pub mod neighbour_grid;
+pub(crate) mod pressure_solve;
 pub mod probe;
 pub(crate) mod rates;
 pub mod reinitialise;
@@ -38,6 +44,10 @@ pub fn register_standard(registry: &mut StageRegistry) {
     eos::register(registry);
     continuity::register(registry);
     forces::register(registry);
+    dfsph_factor::register(registry);
+    divergence_solve::register(registry);
+    density_solve::register(registry);
+    advance::register(registry);
     probe::register(registry);
     integrate::register(registry);
     damping_zone::register(registry);

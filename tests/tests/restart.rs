@@ -14,6 +14,7 @@ use std::path::{Path, PathBuf};
 const WAVE: &str = include_str!("../../scenarios/wave_maker.ron");
 const SLOSHING: &str = include_str!("../../scenarios/sloshing.ron");
 const DAM: &str = include_str!("../../scenarios/dam_break.ron");
+const DAM_BREAK_DFSPH: &str = include_str!("../../scenarios/dam_break_dfsph.ron");
 
 /// A coarse wave maker: 630 particles, the piston moving from the start, particles
 /// sorted every 7 steps (so a checkpoint falls between two sorts).
@@ -40,6 +41,23 @@ const SLOSHING_COARSE: [&str; 6] = [
 
 /// The series and frame indexes a resumed run must write as the uninterrupted one.
 const EVERY_OUTPUT: [&str; 4] = ["probes.csv", "energy.csv", "frames.pvd", "walls.pvd"];
+/// A coarse DFSPH dam break: 800 particles sorted every 7 steps, to the first impact.
+const DFSPH_COARSE: [&str; 6] = [
+    "resolution=ParticlesAcross(40)",
+    "pipeline.neighbour_grid.sort_every=7",
+    "end_time=0.6",
+    "pipeline.vtk_frames.interval=0.25",
+    "pipeline.probe.plots=false",
+    "pipeline.snapshots.times=[]",
+];
+
+fn dfsph() -> Scenario {
+    load(
+        DAM_BREAK_DFSPH,
+        "scenarios/dam_break_dfsph.ron",
+        &DFSPH_COARSE,
+    )
+}
 
 fn wave() -> Scenario {
     load(WAVE, "scenarios/wave_maker.ron", &WAVE_COARSE)
@@ -91,10 +109,9 @@ fn resume(scenario: Scenario, out: &Path, threads: usize) -> Vec<String> {
     notes
 }
 
-/// The two runs' series and frame indexes (`files`) are byte-identical; removes both
-/// folders.
-fn same_outputs_then_clean(a: PathBuf, b: PathBuf, files: &[&str]) {
-    for f in files {
+/// The two runs' `files` are byte-identical; removes both folders.
+fn same_files_then_clean(a: PathBuf, b: PathBuf, files: &[&str]) {
+    for &f in files {
         let (x, y) = (std::fs::read(a.join(f)), std::fs::read(b.join(f)));
         let (x, y) = (x.unwrap(), y.unwrap_or_else(|e| panic!("{f}: {e}")));
         assert!(x.len() > 100, "{f} is nearly empty");
@@ -105,13 +122,30 @@ fn same_outputs_then_clean(a: PathBuf, b: PathBuf, files: &[&str]) {
     }
 }
 
+/// The DFSPH pipeline keeps its warm start in the checkpointed pressures, and the
+/// solves' reports continue: resumed, it writes what an uninterrupted run writes,
+/// the solves' iterations and errors included.
+#[test]
+fn a_resumed_dfsph_run_is_bit_identical() {
+    let full = uninterrupted(dfsph(), "restart-dfsph-full");
+    let part = stopped(dfsph(), "restart-dfsph-part", Some(0.1), 0.35);
+    resume(dfsph(), &part, 1);
+    let files = [
+        "probes.csv",
+        "density_solve.csv",
+        "divergence_solve.csv",
+        "frames.pvd",
+    ];
+    same_files_then_clean(full, part, &files);
+}
+
 #[test]
 fn a_resumed_piston_run_is_bit_identical() {
     let full = uninterrupted(wave(), "restart-wave-full");
     // 0.3 s is not a multiple of Reinitialise(every: 20) x 1 ms: the stop waits for one.
     let part = stopped(wave(), "restart-wave-part", None, 0.29);
     resume(wave(), &part, 1);
-    same_outputs_then_clean(full, part, &EVERY_OUTPUT);
+    same_files_then_clean(full, part, &EVERY_OUTPUT);
 }
 
 #[test]
@@ -136,7 +170,7 @@ fn a_resumed_rolling_tank_is_bit_identical_and_a_damaged_checkpoint_falls_back()
     // The moved damaged file no longer masks the previous one.
     let notes = resume(sloshing(), &part, 1);
     assert!(notes.is_empty(), "{notes:?}");
-    same_outputs_then_clean(full, part, &EVERY_OUTPUT);
+    same_files_then_clean(full, part, &EVERY_OUTPUT);
 }
 
 #[test]
@@ -326,5 +360,5 @@ fn a_dam_break_resumed_in_the_middle_of_a_neighbour_list_is_bit_identical() {
     drop(sim);
     resume(dam(), &part, 1);
     // A fixed tank writes no walls.pvd.
-    same_outputs_then_clean(full, part, &EVERY_OUTPUT[..3]);
+    same_files_then_clean(full, part, &EVERY_OUTPUT[..3]);
 }

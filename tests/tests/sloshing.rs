@@ -134,9 +134,30 @@ fn sensors_ride_with_the_tank() {
 
 #[test]
 fn small_roll_response_peaks_at_the_first_natural_frequency_and_matches_linear_theory_off_it() {
-    // Roll of 0.5 deg (linear), h/ds = 12, swept across the first mode
-    // (sigma_1 = 7.239 rad/s for L = 0.5 m, h = 0.2 m). Each case: one-period smooth
-    // start, 5 periods to settle, 5 fitted.
+    small_roll_response("roll_sweep", None);
+}
+
+/// The same sweep with the DFSPH pipeline (docs/physics.md, "DFSPH") in place of the
+/// tank's weakly-compressible one: the same walls, viscosity and roll-moment probe.
+/// It fails: the response peaks at 0.956 sigma_1 (0.928 with the density solve's
+/// tolerance at 0.01 %), outside the 3 % the WCSPH pipeline meets. The phase crosses
+/// -90 degrees at sigma_1, but the pipeline over-damps the mode (resonant amplitude 38 %
+/// of linear theory's at the default step, 54 % at 1 ms), which moves the fitted peak
+/// (docs/validation.md, "DFSPH"). Kept, ignored, until the damping is reduced:
+/// `cargo test --release -p sph-tests --test sloshing -- --ignored dfsph`.
+#[test]
+#[ignore = "fails: DFSPH over-damps the mode, its response peaks at 0.956 sigma_1 (docs/validation.md, DFSPH)"]
+fn small_roll_response_with_dfsph_peaks_at_the_first_natural_frequency() {
+    let pipeline = "pipeline=[GhostWalls(slip: FreeSlip, hydrostatic: true), NeighbourGrid(), \
+        DfsphFactor(), DivergenceSolve(), Forces(terms: [ArtificialViscosity(alpha: 0.03)]), \
+        DensitySolve(), Probe(interval: 0.005, roll_moment: true, plots: false), Advance()]";
+    small_roll_response("roll_sweep_dfsph", Some(pipeline));
+}
+
+/// Roll of 0.5 deg (linear), h/ds = 12, swept across the first mode (sigma_1 = 7.239
+/// rad/s for L = 0.5 m, h = 0.2 m), with `pipeline` replacing the tank's if given. Each
+/// case: one-period smooth start, 5 periods to settle, 5 fitted.
+fn small_roll_response(tag: &str, pipeline: Option<&str>) {
     let sigma1 = 7.238827;
     let ratios = [0.7, 0.94, 0.97, 1.0, 1.03, 1.06, 1.3];
     let omegas: Vec<String> = ratios.iter().map(|r| format!("{}", r * sigma1)).collect();
@@ -148,11 +169,14 @@ fn small_roll_response_peaks_at_the_first_natural_frequency_and_matches_linear_t
             omegas.join(", ")
         ),
     ]
+    .into_iter()
+    .chain(pipeline.map(String::from))
+    .collect::<Vec<_>>()
     .iter()
     .map(|o| o.parse().unwrap())
     .collect();
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/rolling_tank.ron");
-    let out = sph_tests::support::temp_out("roll_sweep");
+    let out = sph_tests::support::temp_out(tag);
     let responses = sph_study::sweep::run_sweep(
         &path,
         &overrides,

@@ -365,3 +365,24 @@ fn fallback_errors_point_at_the_study_file() {
     assert!(e.contains("bad.ron:5:") && e.contains("sets"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Every study shipped in scenarios/studies/ loads: its file parses, and every case's
+/// and fallback's scenario loads with the case's overrides (`Study::load` loads them
+/// all), so a shipped study cannot fail at its first case on a renamed field or path.
+#[test]
+fn every_shipped_study_loads_with_all_its_cases() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/studies");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "ron"))
+        .collect();
+    files.sort();
+    // The six dam-break studies, the density treatment and the three sloshing studies.
+    assert!(files.len() >= 11, "{files:?}");
+    for f in &files {
+        let study = Study::load(f, &[], &sph_stages::standard_registry())
+            .unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+        assert!(!study.cases.is_empty(), "{}", f.display());
+    }
+}

@@ -2,7 +2,8 @@
 //! gives the same results: every shipped scenario (scenarios/*.ron), at a coarse
 //! resolution and for a fraction of a second, run on one thread, on two, and on two
 //! again, ends with bit-identical particles (positions, velocities, densities by
-//! particle id) and writes byte-identical probes.csv and energy.csv. A scenario file
+//! particle id) and writes byte-identical probes.csv and energy.csv (and, for the DFSPH
+//! scenarios, the solves' density_solve.csv and divergence_solve.csv). A scenario file
 //! added to scenarios/ without an entry here fails `every_shipped_scenario_is_covered`.
 
 use sph_core::components::{Density, ParticleId, Position, Velocity};
@@ -40,8 +41,14 @@ shipped! {
         ["resolution=ParticlesAcross(40)", "end_time=0.3"];
     dam_break_paper_is_deterministic: "dam_break_paper.ron",
         ["resolution=ParticlesAcross(40)", "end_time=0.3"];
+    dam_break_dfsph_is_deterministic: "dam_break_dfsph.ron",
+        ["resolution=ParticlesAcross(40)", "end_time=0.6"];
+    hydrostatic_dfsph_is_deterministic: "hydrostatic_dfsph.ron",
+        ["resolution=Spacing(0.05)", "end_time=0.6"];
     hydrostatic_is_deterministic: "hydrostatic.ron",
         ["resolution=Spacing(0.05)", "end_time=0.3"];
+    sloshing_dfsph_is_deterministic: "sloshing_dfsph.ron",
+        ["resolution=ParticlesAcross(60)", "end_time=0.6", "tank.motion.ramp=0.1"];
     sloshing_is_deterministic: "sloshing.ron",
         ["resolution=ParticlesAcross(60)", "end_time=0.4", "tank.motion.ramp=0.1"];
     sloshing_paper_is_deterministic: "sloshing_paper.ron",
@@ -136,10 +143,16 @@ fn check_deterministic(text: &str, file: &str, coarse: &[&str]) {
     }
 }
 
-/// probes.csv and energy.csv (those the scenario writes; at least one) are identical.
+/// probes.csv, energy.csv and the DFSPH solves' iterations and errors (those the
+/// scenario writes; at least one) are identical.
 fn compare_outputs(file: &str, one: &Path, other: &Path, what: &str) {
     let mut compared = 0;
-    for name in ["probes.csv", "energy.csv"] {
+    for name in [
+        "probes.csv",
+        "energy.csv",
+        "density_solve.csv",
+        "divergence_solve.csv",
+    ] {
         let (Ok(a), Ok(b)) = (
             std::fs::read_to_string(one.join(name)),
             std::fs::read_to_string(other.join(name)),

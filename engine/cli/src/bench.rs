@@ -129,6 +129,9 @@ pub struct Measurement {
     pub status: String,
     /// The run's probes.csv `front` column, (time, x), when the scenario writes it.
     pub front: Vec<(f64, f64)>,
+    /// summary.json's diagnostics (the DFSPH solves' iteration counts among them).
+    #[serde(default)]
+    pub diagnostics: std::collections::BTreeMap<String, f64>,
 }
 
 impl Measurement {
@@ -347,6 +350,7 @@ pub fn run_case(
         heap_peak: heap_peak.saturating_sub(heap_base) as u64,
         status: summary.status,
         front,
+        diagnostics: summary.diagnostics,
     })
 }
 

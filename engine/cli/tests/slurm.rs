@@ -170,6 +170,19 @@ fn free_ports() -> u16 {
         .expect("no two free ports between 16817 and 17817")
 }
 
+/// The time of the last complete row of a probes.csv (0 if none yet).
+fn last_time(p: &Path) -> f64 {
+    std::fs::read_to_string(p)
+        .ok()
+        .and_then(|t| {
+            t.lines()
+                .rev()
+                .skip(1) // the last line may be half written
+                .find_map(|l| l.split(',').next()?.parse::<f64>().ok())
+        })
+        .unwrap_or(0.0)
+}
+
 fn tail(p: &Path) -> String {
     let t = std::fs::read_to_string(p).unwrap_or_default();
     let lines: Vec<&str> = t.lines().collect();
@@ -426,8 +439,19 @@ fn a_run_preempted_by_sigterm_is_requeued_and_ends_as_an_uninterrupted_run() {
             );
             std::thread::sleep(Duration::from_millis(50));
         }
-        // Well under way: a quarter of the uninterrupted run's time.
-        std::thread::sleep(Duration::from_secs_f64(uninterrupted / 4.0));
+        // Well under way: a quarter (then a half) of the simulated time, read from the
+        // probes rather than waited out on the clock, which on a loaded machine let the
+        // job finish before the signal.
+        let until = 24.0 * (round + 1) as f64 / 4.0;
+        let start = Instant::now();
+        while last_time(&probes) < until {
+            assert!(
+                start.elapsed() < Duration::from_secs(300),
+                "the run never reached t = {until} s: {}",
+                tail(&log)
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
         let o = cluster
             .cmd("scancel")
             .args(signal)

@@ -16,6 +16,8 @@
 //!   asked for by `Energy` and filled in by `Forces`.
 //! - [`WallPower`]: the rate of work the walls do on the fluid through the ghosts,
 //!   asked for by `Energy` and filled in by `Forces`.
+//! - [`GuardPower`]: the energy the safeguards (reflections, density floor) add,
+//!   asked for by `Energy` and filled in by `Integrate`.
 //! - [`Guarded`]: per fluid particle, which safeguards have acted on it (`Integrate`
 //!   sets, `Probe` reads).
 //! - [`ArtificialViscosity`]: the viscosity coefficients the momentum stage exposes
@@ -356,6 +358,17 @@ pub struct DiffusionPower {
     pub power: f64,
 }
 
+/// The energy the safeguards outside the model add to the fluid (wall reflections, the
+/// density floor, densities restored on reflection): the integrator stores the change
+/// of kinetic + potential + internal energy its guards made this step, divided by the
+/// step, when a stage that reports energy has asked for it (by inserting it), so that
+/// energy.csv books it apart from the flow (docs/physics.md, "Energy budget").
+#[derive(Debug, Default, Clone, Copy)]
+pub struct GuardPower {
+    /// The guards' energy change this step over the step [W per metre of depth].
+    pub power: f64,
+}
+
 /// Work the walls do on the fluid through the ghost particles: the forces stage stores
 /// its rate here each step when a stage that reports energy has asked for it (by
 /// inserting it). It is the rate at which the ghost pairs change the fluid's energy
@@ -462,3 +475,43 @@ pub fn refresh_ghost_density(sim: &Sim) -> Result<(), StepError> {
         });
     Ok(())
 }
+
+/// The linear part of each ghost's velocity mirror, fluid-to-ghost, one 2x2 matrix
+/// `[xx, xy, yx, yy]` per ghost in archetype order: a change dv of a source's velocity
+/// changes its ghost's by L dv (free slip: I - 2 n n^T per wall crossed; no slip: -I).
+/// Asked for by a stage that changes fluid velocities after the ghosts were placed
+/// (the DFSPH solves, which keep the ghosts' velocities mirrored during their
+/// iterations) by inserting it; filled in by `GhostWalls` every step.
+#[derive(Debug, Default, Clone)]
+pub struct GhostReflections(pub Vec<[f64; 4]>);
+
+impl GhostReflections {
+    /// L v for ghost `k`.
+    #[inline(always)]
+    pub fn apply(&self, k: usize, v: DVec2) -> DVec2 {
+        let l = self.0[k];
+        DVec2::new(l[0] * v.x + l[1] * v.y, l[2] * v.x + l[3] * v.y)
+    }
+}
+
+/// The divergence-free SPH factors of one step (Bender & Koschier 2017, eq. 11, in
+/// pressure form): for every fluid particle
+/// alpha_i = rho_i^2 / ( |sum_j m_j grad W_ij|^2 + sum_j |m_j grad W_ij|^2 ),
+/// so a pressure p_i = alpha_i (rho*_i - rho_0) / dt^2 removes particle i's predicted
+/// density error rho*_i - rho_0 when its neighbours' pressures are held fixed (the
+/// Jacobi step of both DFSPH solves); and for every ghost the pressure it adds to its
+/// source's (the hydrostatic carry rho_0 (g - a_w) . (x_ghost - x_source) with the
+/// ghost walls' `hydrostatic: true`, else 0). Written by `DfsphFactor` after the
+/// neighbour grid, read by `DivergenceSolve` and `DensitySolve`.
+#[derive(Debug, Default, Clone)]
+pub struct DfsphFactors {
+    /// alpha_i per fluid particle [m^2].
+    pub alpha: Vec<f64>,
+    /// Pressure carried to each ghost [Pa], archetype order.
+    pub ghost_offset: Vec<f64>,
+}
+
+/// The step the pressure solve chose (from the velocity CFL condition), for the stage
+/// that advances the clock by it: written by `DensitySolve`, read by `Advance`.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct StepSize(pub f64);

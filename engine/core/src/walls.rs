@@ -182,6 +182,43 @@ impl Walls {
             && (x - self.corner_point(corner)).length_squared() < reach * reach
     }
 
+    /// Reflects a particle at `x` that ended a step behind a wall: its position is
+    /// mirrored across the wall, and the outward normal component of each velocity in
+    /// `vs` (relative to the wall's velocity at the particle's foot) reversed; past a
+    /// convex corner within `reach` of it, across both walls. Returns whether it did.
+    /// The integrators' wall safeguard (docs/architecture.md, "Instability handling").
+    #[inline]
+    pub fn reflect<const N: usize>(
+        &self,
+        reach: f64,
+        x: &mut DVec2,
+        mut vs: [&mut DVec2; N],
+    ) -> bool {
+        let mut hit = false;
+        let mut bounce = |k: usize, x: &mut DVec2| {
+            let (d, n) = (self.lines[k].distance(*x), self.lines[k].normal);
+            let vw = self.now[k].velocity_at(*x - d * n);
+            *x -= 2.0 * d * n;
+            for v in vs.iter_mut() {
+                **v -= 2.0 * (**v - vw).dot(n).min(0.0) * n;
+            }
+            hit = true;
+        };
+        for (k, line) in self.lines.iter().enumerate() {
+            if line.behind(*x) {
+                bounce(k, x);
+            }
+        }
+        // Out through a corner: behind both lines but alongside neither wall.
+        for c in &self.corners {
+            if self.past_corner(c, *x, reach) {
+                bounce(c.first, x);
+                bounce(c.second, x);
+            }
+        }
+        hit
+    }
+
     /// What [`Walls::crossed`] found, in words: ``wall `right` `` or ``the corner of
     /// walls `left` and `bottom` `` (the names are the world's `Wall` components).
     pub fn describe(&self, world: &World, crossing: Crossing) -> String {

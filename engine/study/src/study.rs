@@ -203,6 +203,23 @@ pub enum Metric {
         #[serde(default = "first_mode")]
         mode: usize,
     },
+    /// First harmonic of a signal at the tank's roll period over the whole periods
+    /// from `from` [s] ([`metrics::forced_harmonic`]): `<c>_amplitude` and `<c>_lag_deg`
+    /// (how many degrees it trails the roll angle). For a forced-roll tank, e.g. the
+    /// liquid's `roll_moment`.
+    RollHarmonic {
+        column: String,
+        #[serde(default)]
+        from: f64,
+    },
+    /// One peak per roll period of the tank from `from` [s] ([`metrics::period_peaks`]):
+    /// `<c>_peak_median` and `<c>_peak_max`, in the column's unit. For impacts that
+    /// recur once per period, e.g. a wall sensor in a sloshing tank.
+    PeriodPeaks {
+        column: String,
+        #[serde(default)]
+        from: f64,
+    },
     /// (E(0) - E(t))/E(0) of E = kinetic + potential (energy.csv) at each time:
     /// `energy_loss_t<t>`.
     EnergyLoss { times: Vec<f64> },
@@ -989,6 +1006,15 @@ fn scales(s: &Scenario) -> (f64, f64, f64) {
     )
 }
 
+/// The tank's roll (period [s], phase [deg]); NaNs if the scenario has no roll.
+fn roll(scenario: Option<&Scenario>) -> (f64, f64) {
+    scenario
+        .and_then(|s| s.spec.tank.as_ref())
+        .and_then(|t| t.motion.as_ref())
+        .and_then(|m| m.roll.as_ref())
+        .map_or((f64::NAN, f64::NAN), |r| (r.period.0, r.phase))
+}
+
 /// The final fluid positions a completed case wrote.
 fn final_positions(dir: &Path) -> Option<Vec<DVec2>> {
     let (_, rows) = crate::series::read_table(&dir.join("final_particles.csv")).ok()?;
@@ -1091,6 +1117,21 @@ fn metric_values(
             vec![
                 (format!("{b}_omega"), omega),
                 (format!("{b}_omega_error"), omega / theory - 1.0),
+            ]
+        }
+        Metric::RollHarmonic { column, from } => {
+            let (period, phase) = roll(scenario);
+            let (a, lag) = metrics::forced_harmonic(&probes(column), period, phase, *from);
+            let b = base(column);
+            vec![(format!("{b}_amplitude"), a), (format!("{b}_lag_deg"), lag)]
+        }
+        Metric::PeriodPeaks { column, from } => {
+            let (period, _) = roll(scenario);
+            let (median, max) = metrics::period_peaks(&probes(column), period, *from);
+            let b = base(column);
+            vec![
+                (format!("{b}_peak_median"), median),
+                (format!("{b}_peak_max"), max),
             ]
         }
         Metric::EnergyLoss { times } => {

@@ -12,6 +12,7 @@ pub mod artificial_pressure;
 pub mod artificial_viscosity;
 pub mod continuity;
 pub mod delta_sph;
+pub mod dfsph_factor;
 pub mod diffusion;
 pub mod fourtakas;
 pub mod laminar_viscosity;

@@ -190,6 +190,85 @@ pub fn outside(positions: &[DVec2], lo: DVec2, hi: DVec2) -> usize {
         .count()
 }
 
+/// The whole periods of length `period` from `from` to the series' end, as the window's
+/// end `from + n period` (n >= 1), or None if the series is shorter than one period
+/// after `from` or the period is not positive.
+fn whole_periods_end(series: &[(f64, f64)], from: f64, period: f64) -> Option<(usize, f64)> {
+    let end = series.last()?.0;
+    // NaNs fail both comparisons.
+    if period.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
+        || end.partial_cmp(&from) != Some(std::cmp::Ordering::Greater)
+    {
+        return None;
+    }
+    // A sample interval's worth of slack: a run that ends on a period boundary has its
+    // last sample up to one interval before it, and keeps that period.
+    let interval = match series {
+        [.., a, b] => (b.0 - a.0).max(0.0),
+        _ => 0.0,
+    };
+    let n = ((end + interval - from) / period).floor();
+    (n >= 1.0).then_some((n as usize, from + n * period))
+}
+
+/// First harmonic of a forced response over the whole periods from `from`: the least-
+/// squares fit y = a sin(w t + phi) + c with w = 2 pi / period (see
+/// [`crate::waves::harmonic`]), as (a, lag) where lag = `forcing_phase` - phi in
+/// degrees, wrapped into (-180, 180]: how far the response trails a forcing
+/// A sin(w t + forcing_phase). NaNs if less than one whole period is available.
+pub fn forced_harmonic(
+    series: &[(f64, f64)],
+    period: f64,
+    forcing_phase_deg: f64,
+    from: f64,
+) -> (f64, f64) {
+    let Some((_, to)) = whole_periods_end(series, from, period) else {
+        return (f64::NAN, f64::NAN);
+    };
+    let (t, y): (Vec<f64>, Vec<f64>) = series.iter().copied().unzip();
+    let omega = 2.0 * std::f64::consts::PI / period;
+    match crate::waves::harmonic(&t, &y, omega, from, to) {
+        Some((a, phi)) => {
+            let lag = (forcing_phase_deg - phi.to_degrees()).rem_euclid(360.0);
+            (a, if lag > 180.0 { lag - 360.0 } else { lag })
+        }
+        None => (f64::NAN, f64::NAN),
+    }
+}
+
+/// The largest sample in each whole period [from + k T, from + (k + 1) T) to the
+/// series' end, as (median, maximum) of those per-period peaks: the statistics of
+/// impacts that recur once per forcing period. NaNs if less than one whole period.
+pub fn period_peaks(series: &[(f64, f64)], period: f64, from: f64) -> (f64, f64) {
+    let Some((n, _)) = whole_periods_end(series, from, period) else {
+        return (f64::NAN, f64::NAN);
+    };
+    let mut peaks: Vec<f64> = (0..n)
+        .map(|k| {
+            let lo = from + k as f64 * period;
+            let inside = series.iter().filter(|p| p.0 >= lo && p.0 < lo + period);
+            // f64::max would drop a NaN sample; a period holding one has no peak.
+            inside.fold(f64::NEG_INFINITY, |m, p| {
+                if m.is_nan() || p.1.is_nan() {
+                    f64::NAN
+                } else {
+                    m.max(p.1)
+                }
+            })
+        })
+        .collect();
+    if peaks.iter().any(|p| !p.is_finite()) {
+        return (f64::NAN, f64::NAN);
+    }
+    peaks.sort_by(f64::total_cmp);
+    let median = if n % 2 == 1 {
+        peaks[n / 2]
+    } else {
+        0.5 * (peaks[n / 2 - 1] + peaks[n / 2])
+    };
+    (median, peaks[n - 1])
+}
+
 /// Indices of the Pareto-optimal points (x, y), both to be minimised: no other point
 /// is at least as good in both and better in one. Non-finite points are never optimal.
 /// Returned in increasing x.
@@ -340,5 +419,57 @@ mod tests {
             (5.0, 1.0),
         ];
         assert_eq!(pareto_front(&p), vec![0, 1, 3]);
+    }
+
+    #[test]
+    fn forced_harmonic_gives_amplitude_and_lag_behind_the_forcing() {
+        let period = 1.6;
+        let w = 2.0 * PI / period;
+        // y trails sin(w t) by 95 deg, with an offset and a third harmonic that the
+        // first-harmonic fit over whole periods must ignore.
+        let y =
+            |t: f64| 3.0 + 120.0 * (w * t - 95f64.to_radians()).sin() + 30.0 * (3.0 * w * t).sin();
+        let s = sampled(y, 8.0, 8000);
+        let (a, lag) = forced_harmonic(&s, period, 0.0, 1.6);
+        assert!((a - 120.0).abs() < 1e-6, "{a}");
+        assert!((lag - 95.0).abs() < 1e-6, "{lag}");
+        // Against a forcing of phase 100 deg the response trails by 195 deg, which
+        // wraps to -165 (a lead of 165 deg).
+        let (_, lag) = forced_harmonic(&s, period, 100.0, 1.6);
+        assert!((lag + 165.0).abs() < 1e-6, "{lag}");
+        // Less than a whole period after `from`: nothing to fit.
+        assert!(forced_harmonic(&s, period, 0.0, 7.0).0.is_nan());
+        assert!(forced_harmonic(&s, -1.0, 0.0, 0.0).0.is_nan());
+    }
+
+    #[test]
+    fn period_peaks_take_the_median_and_largest_of_one_peak_per_period() {
+        // One spike per period of heights 5, 1, 9, 3 (periods of 2 s from t = 1), on a
+        // zero background; the partial period after t = 9 is not counted.
+        let heights = [5.0, 1.0, 9.0, 3.0, 100.0];
+        let s = sampled(
+            |t| {
+                let k = ((t - 1.0) / 2.0).floor();
+                let phase = t - 1.0 - 2.0 * k;
+                if t >= 1.0 && (phase - 0.5).abs() < 0.01 {
+                    heights[k as usize]
+                } else {
+                    0.0
+                }
+            },
+            9.9,
+            9900,
+        );
+        let (median, max) = period_peaks(&s, 2.0, 1.0);
+        assert_eq!((median, max), (4.0, 9.0));
+        // Sampled every 0.001 s up to t = 8.9995, one sample short of the fourth period's
+        // end at t = 9: that period still counts.
+        let short: Vec<(f64, f64)> = s.iter().copied().filter(|p| p.0 < 8.9995).collect();
+        assert_eq!(period_peaks(&short, 2.0, 1.0), (4.0, 9.0));
+        // A NaN sample in a period is not dropped: the statistics are NaN.
+        let mut bad = s.clone();
+        bad[3000].1 = f64::NAN;
+        assert!(period_peaks(&bad, 2.0, 1.0).0.is_nan());
+        assert!(period_peaks(&s, 2.0, 9.5).0.is_nan());
     }
 }

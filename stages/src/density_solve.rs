@@ -1,0 +1,259 @@
+//! The constant-density solve of DFSPH (docs/physics.md, "DFSPH"; Bender & Koschier
+//! 2017, Algorithm 3, eqs. 11-12), with the step size:
+//! 1. dt from the velocity CFL condition dt = C ds / max|v| (their eq. 13, with the
+//!    particle spacing as the particle size), at most `max_dt`, the last step shortened
+//!    to land on the end time; published as `vocab::StepSize` for `Advance`;
+//! 2. the velocities predicted with the non-pressure accelerations `Forces` wrote
+//!    (gravity, viscosity): v* = v + dt a (ghosts by their mirror);
+//! 3. a Jacobi iteration (`pressure_solve`) for pressures p >= 0 that bring the
+//!    predicted densities rho*_i = rho_i + dt D rho_i/Dt down to rho_0, warm-started
+//!    from half the previous step's pressures (the `Pressure` column, which is
+//!    checkpointed and sorted with the particles);
+//! 4. `Acceleration` completed with the pressure acceleration, so the probes' roll
+//!    moment (M = sum m (x - P) x (g - a)) sees the whole force, and the `Pressure`
+//!    column left with the solve's pressures for the wall-pressure extraction.
+//!
+//! The error is the mean compression over the fluid, max(rho*_i - rho_0, 0) / rho_0.
+
+use crate::pressure_solve::{limits, Jacobi, Limits, Report, Target};
+use glam::DVec2;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use sph_core::checkpoint::{Dec, Enc};
+use sph_core::components::{
+    Acceleration, Density, Fluid, Ghost, Mass, Position, Pressure, Velocity,
+};
+use sph_core::contract::Access;
+use sph_core::sim::{Clock, Sim};
+use sph_core::stage::{SetupError, Stage, StepError};
+use sph_core::vocab::{require_neighbours, DfsphFactors, GhostReflections, Neighbours, StepSize};
+use sph_core::world::{archetype, column, column_mut};
+use sph_core::StageRegistry;
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Params {
+    /// Mean density error at which the solve stops, relative to rho_0. Default 0.001
+    /// (0.1 %).
+    pub tolerance: f64,
+    /// Least number of iterations. Default 2 (the paper's: one pass of the pressure
+    /// through the neighbours is not yet a solve).
+    pub min_iterations: u32,
+    /// Iteration cap; a step that reaches it above the tolerance is counted in
+    /// `density_solve_unconverged`. Default 100.
+    pub max_iterations: u32,
+    /// Jacobi relaxation omega, 0 < omega <= 1 (docs/physics.md, "DFSPH": 1 diverges
+    /// on still water). Default 0.5.
+    pub relaxation: f64,
+    /// The fraction of the previous step's pressures the solve starts from, where the
+    /// velocities before the pressure acts compress the particle (Bender & Koschier's
+    /// warm start; the rest is solved for again, so the pressure does not start above
+    /// what the step needs). Default 0.5.
+    pub warm_start: f64,
+    /// CFL number C of dt = C ds / max|v|. Default 0.4 (Bender & Koschier's).
+    pub courant: f64,
+    /// Largest step [s] (still water, the first steps). Default 0.005.
+    pub max_dt: f64,
+    /// The run stops as unstable when dt falls below this fraction of the first step.
+    /// Default 1e-3.
+    pub collapse_fraction: f64,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Self {
+            tolerance: 1e-3,
+            min_iterations: 2,
+            max_iterations: 100,
+            relaxation: 0.5,
+            warm_start: 0.5,
+            courant: 0.4,
+            max_dt: 5e-3,
+            collapse_fraction: 1e-3,
+        }
+    }
+}
+
+pub fn register(registry: &mut StageRegistry) {
+    registry.register_checked(
+        "density_solve",
+        "DFSPH: step size by CFL, pressure solve to rest density (Jacobi iteration)",
+        |p: Params| {
+            let out = sph_core::ParamError::new;
+            let limits = limits(
+                p.tolerance,
+                p.min_iterations,
+                p.max_iterations,
+                p.relaxation,
+                p.warm_start,
+            )?;
+            if !(p.courant > 0.0 && p.courant <= 2.0) {
+                return Err(out("courant", p.courant, "0 < C <= 2 (0.4 usual)"));
+            }
+            if !(p.max_dt > 0.0 && p.max_dt.is_finite()) {
+                return Err(out("max_dt", p.max_dt, "a number of seconds > 0"));
+            }
+            if !(p.collapse_fraction > 0.0 && p.collapse_fraction < 1.0) {
+                return Err(out("collapse_fraction", p.collapse_fraction, "0 to 1"));
+            }
+            Ok(DensitySolve {
+                params: p,
+                limits,
+                first_dt: None,
+                jacobi: Jacobi::default(),
+                report: Report::default(),
+            })
+        },
+    );
+}
+
+const NAME: &str = "density_solve";
+
+pub struct DensitySolve {
+    params: Params,
+    limits: Limits,
+    /// The first step (the collapse reference).
+    first_dt: Option<f64>,
+    jacobi: Jacobi,
+    report: Report,
+}
+
+impl Stage for DensitySolve {
+    fn name(&self) -> &'static str {
+        NAME
+    }
+
+    fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
+        require_neighbours(sim, NAME)?;
+        sim.resources.insert(GhostReflections::default());
+        sim.resources.insert(StepSize(0.0));
+        self.report.open(sim, NAME, &["dt"])
+    }
+
+    fn save_state(&mut self, _sim: &Sim) -> Result<Vec<u8>, StepError> {
+        self.report.flush()?;
+        let mut e = Enc::default();
+        e.opt_f64(self.first_dt);
+        Ok(e.into_bytes())
+    }
+
+    fn load_state(&mut self, _sim: &mut Sim, state: &[u8]) -> Result<(), sph_core::StateError> {
+        let mut d = Dec::new(state);
+        self.first_dt = d.opt_f64()?;
+        d.end()
+    }
+
+    fn finish(&mut self, _sim: &mut Sim) -> Result<(), StepError> {
+        self.report.flush()
+    }
+
+    fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
+        let Some(fluid) = archetype::<Fluid>(&sim.world) else {
+            return Ok(());
+        };
+        let dt = {
+            let v = column::<Velocity>(fluid)?;
+            let v: &[Velocity] = &v;
+            let max_v2 = v
+                .par_iter()
+                .map(|v| v.0.length_squared())
+                .reduce(|| 0.0, f64::max);
+            self.step_size(sim, max_v2.sqrt(), v)?
+        };
+        // v* = v + dt a, the ghosts' by the mirror of their sources' change.
+        {
+            let a = column::<Acceleration>(fluid)?;
+            let a: &[Acceleration] = &a;
+            column_mut::<Velocity>(fluid)?
+                .par_iter_mut()
+                .zip(a.par_iter())
+                .for_each(|(v, a)| v.0 += dt * a.0);
+            if let (Some(ghost), Some(mirror)) = (
+                archetype::<Ghost>(&sim.world),
+                sim.resources.get::<GhostReflections>(),
+            ) {
+                let source = column::<Ghost>(ghost)?;
+                let source: &[Ghost] = &source;
+                if mirror.0.len() != source.len() {
+                    return Err(StepError::Internal(format!(
+                        "{} ghosts but {} velocity mirrors: GhostWalls must run before DensitySolve",
+                        source.len(),
+                        mirror.0.len()
+                    )));
+                }
+                column_mut::<Velocity>(ghost)?
+                    .par_iter_mut()
+                    .enumerate()
+                    .for_each(|(k, v)| v.0 += dt * mirror.apply(k, a[source[k].source as usize].0));
+            }
+        }
+        let solved = self
+            .jacobi
+            .solve_with_factors(sim, dt, Target::Density, self.limits, true);
+        let outcome = solved?;
+        let acc: &[DVec2] = &self.jacobi.acc;
+        if let Some(fluid) = archetype::<Fluid>(&sim.world) {
+            column_mut::<Acceleration>(fluid)?
+                .par_iter_mut()
+                .zip(acc.par_iter())
+                .for_each(|(a, p)| a.0 += *p);
+        }
+        sim.resources.insert(StepSize(dt));
+        let time = sim.clock.time;
+        self.report.record(sim, NAME, time, outcome, &[dt])
+    }
+
+    fn access(&self) -> Access {
+        Access::new()
+            .reads::<Neighbours>()
+            .reads::<DfsphFactors>()
+            .reads::<GhostReflections>()
+            .reads::<Position>()
+            .reads::<Mass>()
+            .reads::<Density>()
+            .reads::<Clock>()
+            .updates::<Acceleration>()
+            .updates::<Velocity>()
+            .uses::<Ghost>()
+            .writes::<Pressure>()
+            .writes::<StepSize>()
+    }
+}
+
+impl DensitySolve {
+    /// The CFL step for the largest speed `max_v`, capped, landing on the end time;
+    /// an error if it collapsed.
+    fn step_size(&mut self, sim: &Sim, max_v: f64, v: &[Velocity]) -> Result<f64, StepError> {
+        let p = &self.params;
+        if let Some(i) = v.par_iter().position_first(|v| !v.0.is_finite()) {
+            return Err(unstable("non-finite velocity", sim, i));
+        }
+        let mut dt = p.max_dt;
+        if max_v > 0.0 {
+            dt = dt.min(p.courant * sim.constants.spacing / max_v);
+        }
+        let first = *self.first_dt.get_or_insert(dt);
+        if dt < p.collapse_fraction * first {
+            let i = v.iter().position(|v| v.0.length() == max_v).unwrap_or(0);
+            return Err(unstable(
+                &format!("time step collapsed to {dt:.3e} s (first step {first:.3e} s)"),
+                sim,
+                i,
+            ));
+        }
+        let remaining = sim.clock.end_time - sim.clock.time;
+        if remaining < 1.5 * dt {
+            dt = dt.min(remaining);
+        }
+        Ok(dt)
+    }
+}
+
+fn unstable(what: &str, sim: &Sim, i: usize) -> StepError {
+    let x = archetype::<Fluid>(&sim.world).and_then(|f| column::<Position>(f).ok().map(|x| x[i].0));
+    StepError::Unstable {
+        what: what.to_string(),
+        particle: Some(i as u32),
+        position: x,
+    }
+}

@@ -1,0 +1,194 @@
+//! DFSPH densities and factors (docs/physics.md, "DFSPH"; Bender & Koschier 2017,
+//! eqs. 2 and 11): after the neighbour grid, every fluid particle's density by
+//! summation, rho_i = sum_j m_j W_ij (i itself and the ghosts included), and its factor
+//! alpha_i (`terms::dfsph_factor`), in one pass. The ghosts take their sources'
+//! densities (a mirror image has its source's neighbourhood), and each ghost gets the
+//! pressure it carries across its wall: with `GhostWalls(hydrostatic: true)` the
+//! hydrostatic difference rho_0 (g - a_w) . (x_ghost - x_source), a_w the acceleration
+//! of the wall's body at the source (as `vocab::ghost_density` carries it in
+//! WCSPH), else 0. Both go to `vocab::DfsphFactors` for the two solves.
+
+use crate::pressure_solve::each;
+use crate::terms::dfsph_factor::DensityFactor;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure};
+use sph_core::contract::Access;
+use sph_core::kernel::Kernel;
+use sph_core::motion::Pose;
+use sph_core::pair::{Field, Fields};
+use sph_core::sim::Sim;
+use sph_core::stage::{SetupError, Stage, StepError};
+use sph_core::vocab::{require_neighbours, DfsphFactors, GhostSettings, MirrorWall, WallPose};
+use sph_core::world::{archetype, column, column_mut};
+use sph_core::{with_kernel, StageRegistry};
+
+/// `DfsphFactor()`: no parameters.
+#[derive(Debug, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Params {}
+
+pub fn register(registry: &mut StageRegistry) {
+    registry.register(
+        "dfsph_factor",
+        "DFSPH: summation density and the solver factor alpha_i",
+        |_: Params| Ok(DfsphFactor { out: Vec::new() }),
+    );
+}
+
+pub struct DfsphFactor {
+    /// (rho_i, alpha_i) per fluid particle (kept between steps).
+    out: Vec<(f64, f64)>,
+}
+
+impl Stage for DfsphFactor {
+    fn name(&self) -> &'static str {
+        "dfsph_factor"
+    }
+
+    /// Sets every fluid particle's mass to rho_0 ds^2 / S, S the kernel's sum over a
+    /// square lattice of spacing ds (sum_k ds^2 W(|k| ds)), so that a particle inside
+    /// the initial lattice sums to rho_0 exactly and the fluid starts at rest density.
+    /// The scenario's masses (rho(y) ds^2, the weakly-compressible hydrostatic profile)
+    /// would start the column 0.2-0.8 % off rest density (the lattice sum of the
+    /// Wendland kernel at h/ds = 1.3-1.5 is not 1, and the bottom particles carry the
+    /// Tait compression), which the solve would then spend its first steps expanding.
+    /// The pressures start hydrostatic, p = rho_0 g (H - y) (the pressure of the
+    /// scenario's initial densities): the Jacobi iteration carries a pressure change
+    /// one neighbourhood per iteration, so from zero a 50-particle column would fall
+    /// and compress for hundreds of iterations before its weight is carried.
+    /// A resumed run then restores the checkpoint's particles over these.
+    fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
+        require_neighbours(sim, "dfsph_factor")?;
+        sim.resources.insert(DfsphFactors::default());
+        let c = &sim.constants;
+        let ds = c.spacing;
+        let reach = (c.support() / ds).ceil() as i64;
+        let sum = with_kernel!(c.kernel, c.h, |k| {
+            let mut sum = 0.0;
+            for i in -reach..=reach {
+                for j in -reach..=reach {
+                    sum += ds * ds * k.w(ds * ((i * i + j * j) as f64).sqrt());
+                }
+            }
+            sum
+        });
+        let (m, rho0) = (c.eos.rho0 * ds * ds / sum, c.eos.rho0);
+        if let Some(fluid) = archetype::<Fluid>(&sim.world) {
+            let (Ok(mut mass), Ok(mut rho)) =
+                (column_mut::<Mass>(fluid), column_mut::<Density>(fluid))
+            else {
+                return Err(SetupError::new(
+                    "dfsph_factor",
+                    "fluid particles without mass or density",
+                ));
+            };
+            let Ok(mut p) = column_mut::<Pressure>(fluid) else {
+                return Err(SetupError::new(
+                    "dfsph_factor",
+                    "fluid particles without pressure",
+                ));
+            };
+            let eos = c.eos;
+            mass.iter_mut().for_each(|x| x.0 = m);
+            // The scenario's densities are the hydrostatic profile through the Tait
+            // equation: their pressure rho_0 g (H - y) starts the solve's warm start.
+            for (p, rho) in p.iter_mut().zip(rho.iter_mut()) {
+                p.0 = eos.pressure(rho.0);
+                rho.0 = rho0;
+            }
+        }
+        Ok(())
+    }
+
+    fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
+        let _span = tracing::trace_span!("pair_sums").entered();
+        let Some(fluid) = archetype::<Fluid>(&sim.world) else {
+            return Ok(());
+        };
+        self.out.resize(fluid.len() as usize, (0.0, 0.0));
+        let c = &sim.constants;
+        let w0 = with_kernel!(c.kernel, c.h, |k| k.w(0.0));
+        // Packed with the density as well, the layout the filters' loops are compiled
+        // for (the term reads geometry and mass only).
+        let fields = Fields::of(&[Field::Rho]);
+        each(sim, &DensityFactor { w0 }, fields, &mut self.out, |o| o)?;
+        // The resource keeps its buffers from step to step.
+        let mut factors = sim.resources.take::<DfsphFactors>().unwrap_or_default();
+        let result = self.write(sim, &mut factors);
+        sim.resources.insert(factors);
+        result
+    }
+
+    fn access(&self) -> Access {
+        Access::new()
+            .reads::<sph_core::vocab::Neighbours>()
+            .reads::<Position>()
+            .updates::<Mass>()
+            .reads::<WallPose>()
+            .uses::<Ghost>()
+            .uses::<GhostSettings>()
+            .writes::<Density>()
+            .writes::<DfsphFactors>()
+    }
+}
+
+impl DfsphFactor {
+    /// Writes the densities (fluid, then ghosts from their sources), the factors and
+    /// the ghosts' pressure carries into `factors`.
+    fn write(&self, sim: &Sim, factors: &mut DfsphFactors) -> Result<(), StepError> {
+        let Some(fluid) = archetype::<Fluid>(&sim.world) else {
+            return Ok(());
+        };
+        let out = &self.out;
+        column_mut::<Density>(fluid)?
+            .par_iter_mut()
+            .zip(out.par_iter())
+            .for_each(|(rho, o)| rho.0 = o.0);
+        factors.alpha.clear();
+        factors.alpha.extend(out.iter().map(|o| o.1));
+        factors.ghost_offset.clear();
+        let Some(ghost) = archetype::<Ghost>(&sim.world) else {
+            return Ok(());
+        };
+        let source_col = column::<Ghost>(ghost)?;
+        let source: &[Ghost] = &source_col;
+        column_mut::<Density>(ghost)?
+            .par_iter_mut()
+            .zip(source.par_iter())
+            .for_each(|(rho, g)| rho.0 = out[g.source as usize].0);
+        let hydrostatic = sim
+            .resources
+            .get::<GhostSettings>()
+            .is_some_and(|s| s.hydrostatic);
+        if !hydrostatic {
+            factors.ghost_offset.resize(source.len(), 0.0);
+            return Ok(());
+        }
+        // The few walls' body poses, looked up by entity for each ghost.
+        let poses: Vec<(hecs::Entity, Pose)> = sim
+            .world
+            .query::<(hecs::Entity, &WallPose)>()
+            .iter()
+            .map(|(e, w)| (e, w.body))
+            .collect();
+        let (rho0, g) = (sim.constants.eos.rho0, sim.constants.gravity);
+        let (fx, gx) = (column::<Position>(fluid)?, column::<Position>(ghost)?);
+        let walls = column::<MirrorWall>(ghost)?;
+        let (fx, gx, walls): (&[Position], &[Position], &[MirrorWall]) = (&fx, &gx, &walls);
+        factors.ghost_offset.resize(source.len(), 0.0);
+        factors
+            .ghost_offset
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(k, off)| {
+                let xs = fx[source[k].source as usize].0;
+                let a_w = poses
+                    .iter()
+                    .find(|(e, _)| *e == walls[k].0)
+                    .map_or(glam::DVec2::ZERO, |p| p.1.acceleration_at(xs));
+                *off = rho0 * (g - a_w).dot(gx[k].0 - xs);
+            });
+        Ok(())
+    }
+}
