@@ -39,8 +39,9 @@ fn hydrostatic_tank_holds_its_pressure_and_its_particles() {
 
     // Every particle below the surface layer (two kernel supports deep) within 2 % of
     // rho_0 g H of the hydrostatic pressure: docs/analytic.md's suggested tolerance for
-    // H/ds >= 40. (The kernel's discrete gradient moment, 0.997 for Wendland at
-    // h/ds = 1.5, biases the equilibrium by ~0.3 %; acoustic ringing adds ~1 %.)
+    // H/ds >= 40. (The kernel's discrete gradient moment, 0.9992 for Wendland at the
+    // shipped h/ds = 2.0, 0.997 at 1.5, biases the equilibrium by 0.1-0.3 %; acoustic
+    // ringing adds ~1 %.)
     let particles = Particles::of(&sim.world).expect("fluid");
     let (x, p) = (
         particles.fluid::<Position>().unwrap(),
