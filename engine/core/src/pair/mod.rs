@@ -347,18 +347,39 @@ impl<'a, T: PairTerm, K: Kernel> Pass<'a, T, K> {
         // composite's choice of terms) are plain values there, not loads through
         // references in every group.
         let term = self.term.clone();
+        // Groups of eight 64-byte records are read whole (`Gather::records8`), with
+        // the padding particle as a record.
+        let whole = L::WIDTH == 8 && stride == 8;
+        let mut pad_record = [0.0; 8];
+        if whole {
+            for f in 0..Field::COUNT {
+                if wanted[f] {
+                    pad_record[offsets[f]] = pad[f];
+                }
+            }
+        }
         let mut acc = term.zero::<L>();
         for js in neighbours.chunks(L::WIDTH) {
             let mut fields = [L::zero(); Field::COUNT];
-            // SAFETY: L's instructions exist (caller); `index` checks every index
-            // against `len`; the gathers read records of this buffer at offsets below
-            // its stride.
+            // SAFETY: L's instructions exist (caller); `index` and `records8` check
+            // every index against `len`; the gathers read records of this buffer at
+            // offsets below its stride, `records8` whole records of eight f64s of the
+            // 64-byte aligned buffer (`Records`' lines).
             unsafe {
-                let index = L::index(js, stride, len);
-                for f in Field::ALL {
-                    let f = f as usize;
-                    if wanted[f] {
-                        fields[f] = L::gather(index, base, offsets[f], pad[f]);
+                if whole {
+                    let rows = L::records8(js, base, len, &pad_record);
+                    for f in 0..Field::COUNT {
+                        if wanted[f] {
+                            fields[f] = rows[offsets[f]];
+                        }
+                    }
+                } else {
+                    let index = L::index(js, stride, len);
+                    for f in Field::ALL {
+                        let f = f as usize;
+                        if wanted[f] {
+                            fields[f] = L::gather(index, base, offsets[f], pad[f]);
+                        }
                     }
                 }
             }
