@@ -57,6 +57,8 @@ impl Stage for ContinuityStage {
             acceleration: false,
             density_rate: true,
             power: false,
+            wall: false,
+            counts: false,
         };
         rates::run(sim, &self.terms, out, &mut self.unused).map(|_| ())
     }

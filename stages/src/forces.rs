@@ -8,15 +8,15 @@
 use crate::rates::{self, Outputs};
 use crate::terms::{artificial_viscosity, pressure_gradient, RateTerms, TermSpec};
 use serde::{Deserialize, Serialize};
-use sph_core::components::{Acceleration, DensityRate, Fluid};
+use sph_core::components::{Acceleration, DensityRate, Fluid, NeighbourCount};
 use sph_core::contract::Access;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{
-    require_neighbours, ArtificialViscosity, DensityGradients, DiffusionPower, ViscousDissipation,
-    WallPower,
+    require_neighbours, ArtificialViscosity, DensityGradients, DiffusionPower,
+    NeighbourCountsInPass, Neighbours, ViscousDissipation, WallPower,
 };
-use sph_core::world::ensure_component;
+use sph_core::world::{archetype, ensure_component};
 use sph_core::StageRegistry;
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -50,6 +50,7 @@ pub fn register(registry: &mut StageRegistry) {
                 params: p,
                 terms: RateTerms::default(),
                 chunk_power: Vec::new(),
+                counts: false,
             })
         },
     );
@@ -60,6 +61,9 @@ pub struct Forces {
     terms: RateTerms,
     /// The energy rates of each chunk of particles, kept between steps.
     chunk_power: Vec<rates::Power>,
+    /// The fluid has a `NeighbourCount` column, which this pass fills in while the
+    /// lists have a skin (`vocab::NeighbourCountsInPass`).
+    counts: bool,
 }
 
 impl Stage for Forces {
@@ -74,16 +78,32 @@ impl Stage for Forces {
         if self.terms.continuity.is_some() {
             ensure_component::<Fluid, DensityRate>(sim);
         }
+        self.counts = archetype::<Fluid>(&sim.world).is_some_and(|a| a.has::<NeighbourCount>());
+        if self.counts {
+            sim.resources.insert(NeighbourCountsInPass);
+        }
         Ok(())
     }
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
         let _span = tracing::trace_span!("pair_sums").entered();
+        // The walls' work on the fluid, for the energy budget: in the same pass when
+        // the terms include continuity, else a pass over the ghost neighbours only
+        // (stages/src/wall_work.rs).
+        let wall = sim.resources.contains::<WallPower>();
+        let fused = wall && self.terms.continuity.is_some();
         let out = Outputs {
             acceleration: true,
             density_rate: self.terms.continuity.is_some(),
             power: sim.resources.contains::<ViscousDissipation>()
                 || sim.resources.contains::<DiffusionPower>(),
+            wall: fused,
+            // Without a skin the grid counts the lists themselves.
+            counts: self.counts
+                && sim
+                    .resources
+                    .get::<Neighbours>()
+                    .is_some_and(|nb| nb.skin > 0.0),
         };
         if self.terms.delta_sph.is_some() {
             crate::density_gradient::compute(sim)?;
@@ -95,10 +115,11 @@ impl Stage for Forces {
         if let Some(d) = sim.resources.get_mut::<DiffusionPower>() {
             d.power = power.diffusion;
         }
-        // The walls' work on the fluid, for the energy budget: a second pass over the
-        // ghost neighbours only (stages/src/wall_work.rs).
-        if sim.resources.contains::<WallPower>() {
-            let power = crate::wall_work::power(sim, &self.terms)?;
+        if wall {
+            let power = match fused {
+                true => power.wall,
+                false => crate::wall_work::power(sim, &self.terms)?,
+            };
             if let Some(w) = sim.resources.get_mut::<WallPower>() {
                 w.power = power;
             }
@@ -126,7 +147,8 @@ impl Stage for Forces {
             .writes_if::<DensityRate>(continuity)
             .writes::<ViscousDissipation>()
             .writes::<DiffusionPower>()
-            .writes::<WallPower>();
+            .writes::<WallPower>()
+            .uses::<NeighbourCount>();
         match viscosity {
             Some(v) => access.exposes(v),
             None => access,

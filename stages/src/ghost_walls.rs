@@ -8,6 +8,16 @@
 //! archetype and reused from step to step: only the difference in count is spawned or
 //! despawned.
 //!
+//! With lasting neighbour lists (`NeighbourGrid(skin)`), the ghosts are found only
+//! when the lists are rebuilt, for the particles within the support and the skin of a
+//! wall (and up to a skin past its ends), and each keeps its slot (its place in the
+//! lists) until the next rebuild: every step re-mirrors it from its source, with the
+//! source's mass while the source is near the wall by the rule above and zero mass
+//! otherwise, so it weighs exactly as the ghosts found every step would. The lists are
+//! rebuilt when a particle or ghost has moved half the skin, or a wall has: this stage
+//! takes that decision for the grid (`vocab::ListPlan`), as it must renew the ghosts
+//! then.
+//!
 //! Moving walls (a rolling tank): walls are mirrored where they are at the current
 //! time, and velocities are mirrored relative to the wall's own velocity v_w at the
 //! foot of the particle on the wall: free slip reverses the normal component of
@@ -17,12 +27,14 @@
 use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure, Velocity};
 use sph_core::contract::Access;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{
-    ghost_density, GhostReflections, GhostSettings, MirrorWall, WallPose, Walls,
+    ghost_density, GhostReflections, GhostSettings, ListPlan, MirrorWall, Neighbours, WallPose,
+    Walls,
 };
 use sph_core::walls::WallLine;
 use sph_core::world::{archetype, column, column_mut, count};
@@ -66,6 +78,7 @@ pub fn register(registry: &mut StageRegistry) {
                 walls: Walls::default(),
                 images: Vec::new(),
                 chunks: Vec::new(),
+                built: None,
             })
         },
     );
@@ -80,6 +93,8 @@ pub struct GhostWalls {
     /// between steps: no per-step allocation once they have reached their size).
     images: Vec<Image>,
     chunks: Vec<Vec<Image>>,
+    /// When the ghosts were found: the fluid count and the walls' end points.
+    built: Option<(usize, Vec<(DVec2, DVec2)>)>,
 }
 
 /// A particle closer to a wall than this fraction of ds gets no ghost across it. A
@@ -119,19 +134,142 @@ impl Stage for GhostWalls {
         Ok(())
     }
 
+    /// The ghosts' walls and the state of their last finding, so a resumed run keeps
+    /// the uninterrupted run's ghosts (their sources are in the ghost columns).
+    fn save_state(&mut self, _sim: &Sim) -> Result<Vec<u8>, StepError> {
+        let mut e = Enc::default();
+        e.u64(self.images.len() as u64);
+        for img in &self.images {
+            e.u32(img.first as u32);
+            e.u32(img.second.map_or(u32::MAX, u32::from));
+        }
+        let (n_fluid, walls) = self
+            .built
+            .as_ref()
+            .map_or((u64::MAX, &[][..]), |(n, w)| (*n as u64, &w[..]));
+        e.u64(n_fluid);
+        e.u64(walls.len() as u64);
+        for (a, b) in walls {
+            for v in [a.x, a.y, b.x, b.y] {
+                e.f64(v);
+            }
+        }
+        Ok(e.into_bytes())
+    }
+
+    fn load_state(&mut self, _sim: &mut Sim, state: &[u8]) -> Result<(), sph_core::StateError> {
+        let mut d = Dec::new(state);
+        let n = d.len(8)?;
+        self.images.clear();
+        for _ in 0..n {
+            let first = d.u32()?;
+            let second = d.u32()?;
+            let wall = |w: u32| {
+                u16::try_from(w)
+                    .map_err(|_| sph_core::StateError::Mismatch(format!("ghost wall {w}")))
+            };
+            self.images.push(Image {
+                source: 0,
+                first: wall(first)?,
+                second: (second != u32::MAX).then(|| wall(second)).transpose()?,
+            });
+        }
+        let n_fluid = d.u64()?;
+        let count = d.len(32)?;
+        let mut walls = Vec::with_capacity(count);
+        for _ in 0..count {
+            let (ax, ay, bx, by) = (d.f64()?, d.f64()?, d.f64()?, d.f64()?);
+            walls.push((DVec2::new(ax, ay), DVec2::new(bx, by)));
+        }
+        self.built = (n_fluid != u64::MAX).then_some((n_fluid as usize, walls));
+        d.end()
+    }
+
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
         // The walls where the world has them now (the scene moves with the clock).
         self.walls.read(&sim.world);
-        self.find_images(sim)?;
+        let skin = sim.resources.get::<Neighbours>().map_or(0.0, |nb| nb.skin);
+        // While the lists last, the ghosts keep their slots.
+        if skin > 0.0 && self.kept(sim, skin) {
+            self.mirror(sim, false)?;
+            let fluid = archetype::<Fluid>(&sim.world);
+            let ghost = archetype::<Ghost>(&sim.world);
+            let fpos = fluid.map(column::<Position>).transpose()?;
+            let gpos = ghost.map(column::<Position>).transpose()?;
+            let (fpos, gpos) = (
+                fpos.as_deref().unwrap_or(&[]),
+                gpos.as_deref().unwrap_or(&[]),
+            );
+            if let Some(nb) = sim.resources.get_mut::<Neighbours>() {
+                if !nb.outdated(fpos, gpos) {
+                    nb.plan = ListPlan::Keep;
+                    return Ok(());
+                }
+            }
+        }
+        self.find_images(sim, skin)?;
+        resize_pool(&mut sim.world, self.images.len());
+        self.mirror(sim, true)?;
+        self.built = Some((
+            count::<Fluid>(&sim.world),
+            self.walls.now().iter().map(|w| (w.a, w.b)).collect(),
+        ));
+        if let Some(nb) = sim.resources.get_mut::<Neighbours>().filter(|_| skin > 0.0) {
+            nb.plan = ListPlan::Rebuild;
+        }
+        Ok(())
+    }
+
+    /// Mirrors the fluid's positions, velocities, densities and masses across the
+    /// walls where the world has them: writes the ghost particles (with the wall each
+    /// was mirrored across) and the ghost settings.
+    fn access(&self) -> Access {
+        Access::new()
+            .reads::<Position>()
+            .reads::<Velocity>()
+            .reads::<Density>()
+            .reads::<Mass>()
+            .reads::<WallPose>()
+            .uses::<Neighbours>()
+            .writes::<Ghost>()
+            .writes::<MirrorWall>()
+            .writes::<GhostSettings>()
+            .writes::<GhostReflections>()
+    }
+}
+
+impl GhostWalls {
+    /// Whether the ghosts found last can serve this step: the fluid and ghost counts
+    /// are those of the finding, and no wall end has moved half the `skin` since (a
+    /// segment moved rigidly moves no point farther than its ends).
+    fn kept(&self, sim: &Sim, skin: f64) -> bool {
+        let Some((n_fluid, walls)) = &self.built else {
+            return false;
+        };
+        let half = 0.5 * skin;
+        *n_fluid == count::<Fluid>(&sim.world)
+            && self.images.len() == count::<Ghost>(&sim.world)
+            && walls.len() == self.walls.now().len()
+            && walls
+                .iter()
+                .zip(self.walls.now())
+                .all(|((a, b), w)| a.distance(w.a) <= half && b.distance(w.b) <= half)
+    }
+
+    /// Places every ghost at its source's mirror image across its walls, with the
+    /// mirrored velocity, the (corrected) density and the source's mass, or zero mass
+    /// when the source is not near the walls by the rule of a finding without skin.
+    /// `renew`: the ghosts were just found; their sources and walls are written first.
+    fn mirror(&self, sim: &mut Sim, renew: bool) -> Result<(), StepError> {
         let _span = tracing::info_span!("mirror").entered();
         let images = &self.images[..];
-        // Only when a stage asked for them (the DFSPH solves).
+        // Only when a stage asked for them (the DFSPH solves); the walls move with the
+        // tank, so every step.
         if let Some(r) = sim.resources.get_mut::<GhostReflections>() {
             let (lines, slip) = (self.walls.lines(), self.params.slip);
             r.0.clear();
             r.0.extend(images.iter().map(|img| reflection(lines, img, slip)));
         }
-        resize_pool(&mut sim.world, images.len());
         let Some(fluid) = archetype::<Fluid>(&sim.world) else {
             return Ok(());
         };
@@ -151,6 +289,13 @@ impl Stage for GhostWalls {
         let (mut gr, mut gm) = (column_mut::<Density>(ghost)?, column_mut::<Mass>(ghost)?);
         let (fx, fv, fr, fm): (&[Position], &[Velocity], &[Density], &[Mass]) =
             (&fx, &fv, &fr, &fm);
+        if gs.len() != images.len() {
+            return Err(StepError::Internal(format!(
+                "{} ghosts for {} images",
+                gs.len(),
+                images.len()
+            )));
+        }
         let correction = self
             .params
             .hydrostatic
@@ -158,6 +303,7 @@ impl Stage for GhostWalls {
         let (walls, lines) = (self.walls.now(), self.walls.lines());
         let entities = self.walls.entities();
         let slip = self.params.slip;
+        let near = near_rule(sim, 0.0);
         (
             (&mut gs[..], &mut gw[..]),
             &mut gx[..],
@@ -168,61 +314,41 @@ impl Stage for GhostWalls {
         )
             .into_par_iter()
             .for_each(|((g, wall), x, v, rho, m, img)| {
-                let s = img.source as usize;
+                if renew {
+                    *g = Ghost { source: img.source };
+                    *wall = MirrorWall(entities[img.first as usize]);
+                }
+                let s = g.source as usize;
                 let (mut pos, mut vel) = (fx[s].0, fv[s].0);
+                let mut active = true;
                 for k in std::iter::once(img.first).chain(img.second) {
                     let k = k as usize;
+                    active &= near(&lines[k], fx[s].0);
                     vel = mirror_velocity(&lines[k], &walls[k], pos, vel, slip);
                     pos = lines[k].mirror(pos);
                 }
-                *g = Ghost { source: img.source };
-                *wall = MirrorWall(entities[img.first as usize]);
                 x.0 = pos;
                 v.0 = vel;
-                m.0 = fm[s].0;
+                m.0 = if active { fm[s].0 } else { 0.0 };
                 let body = walls[img.first as usize].body;
                 rho.0 = ghost_density(fr[s].0, fx[s].0, pos, correction.map(|c| (c, body)));
             });
         Ok(())
     }
 
-    /// Mirrors the fluid's positions, velocities, densities and masses across the
-    /// walls where the world has them: writes the ghost particles (with the wall each
-    /// was mirrored across) and the ghost settings.
-    fn access(&self) -> Access {
-        Access::new()
-            .reads::<Position>()
-            .reads::<Velocity>()
-            .reads::<Density>()
-            .reads::<Mass>()
-            .reads::<WallPose>()
-            .writes::<Ghost>()
-            .writes::<MirrorWall>()
-            .writes::<GhostSettings>()
-            .writes::<GhostReflections>()
-    }
-}
-
-impl GhostWalls {
-    /// Fills `images` with the ghosts this step needs, in a fixed order (by source,
-    /// then wall), reusing the per-chunk buffers from step to step.
-    fn find_images(&mut self, sim: &Sim) -> Result<(), StepError> {
+    /// Fills `images` with the ghosts this step needs (within the support and `skin`
+    /// of a wall), in a fixed order (by source, then wall), reusing the per-chunk
+    /// buffers from step to step.
+    fn find_images(&mut self, sim: &Sim, skin: f64) -> Result<(), StepError> {
         let _span = tracing::info_span!("find_images").entered();
         self.images.clear();
         let Some(fluid) = archetype::<Fluid>(&sim.world) else {
             return Ok(());
         };
         let pos = column::<Position>(fluid)?;
-        let support = sim.constants.support();
-        let on_wall = ON_WALL * sim.constants.spacing;
         let lines = self.walls.lines();
         let corners = self.walls.corners();
-        // A particle on the wall (closer than `on_wall`) is its own mirror image: a
-        // ghost there would count its mass twice for its neighbours.
-        let near = |w: &WallLine, x: DVec2| {
-            let (d, s) = (w.distance(x), w.abscissa(x));
-            d > on_wall && d < support && s >= 0.0 && s <= w.length
-        };
+        let near = near_rule(sim, skin);
         self.chunks.resize_with(pos.len().div_ceil(CHUNK), Vec::new);
         self.chunks.truncate(pos.len().div_ceil(CHUNK));
         pos.par_chunks(CHUNK)
@@ -257,6 +383,19 @@ impl GhostWalls {
             self.images.extend_from_slice(chunk);
         }
         Ok(())
+    }
+}
+
+/// Whether a particle at x gets a ghost across wall w: within the support of the wall
+/// and over it, with a `skin` of margin (0 for the rule itself). A particle on the
+/// wall (closer than `ON_WALL` ds) is its own mirror image: a ghost there would count
+/// its mass twice for its neighbours.
+fn near_rule(sim: &Sim, skin: f64) -> impl Fn(&WallLine, DVec2) -> bool + Sync {
+    let support = sim.constants.support();
+    let on_wall = ON_WALL * sim.constants.spacing;
+    move |w: &WallLine, x: DVec2| {
+        let (d, s) = (w.distance(x), w.abscissa(x));
+        d > on_wall - skin && d < support + skin && s >= -skin && s <= w.length + skin
     }
 }
 

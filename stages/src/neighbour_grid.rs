@@ -2,10 +2,14 @@
 //! (docs/physics.md, "Neighbour search"), over fluid and ghost particles together.
 //!
 //! Publishes [`Neighbours`] (in the shared vocabulary, `sph_core::vocab`): for every
-//! fluid particle the list of particles within the support (joint numbering: fluid
-//! `0..n_fluid`, then ghosts), in a fixed order — cells scanned row by row, indices
-//! ascending within a cell — so every sum over neighbours is the same whatever the
-//! thread count. The lists are reused by every later stage of the step.
+//! fluid particle the list of particles within the support and a skin beyond it
+//! (joint numbering: fluid `0..n_fluid`, then ghosts), in a fixed order — cells
+//! scanned row by row, indices ascending within a cell — so every sum over neighbours
+//! is the same whatever the thread count. The lists last while no particle (fluid or
+//! ghost) has moved more than half the skin since they were built (Verlet lists):
+//! every pair within the support is then in them. That decision depends on the
+//! positions alone; the positions at the build go into the checkpoint, from which a
+//! resumed run rebuilds exactly the lists of the uninterrupted one.
 
 use crate::scan::Scan;
 use crate::sort_particles::{counting_sort, sort_by_cell, SortBuffers};
@@ -17,7 +21,10 @@ use sph_core::components::{Fluid, Ghost, NeighbourCount, Position};
 use sph_core::contract::Access;
 use sph_core::sim::Sim;
 use sph_core::stage::{Stage, StepError};
-use sph_core::vocab::{resize_by_eighths, CellGrid, NeighbourBlock, Neighbours, BLOCK, REACH};
+use sph_core::vocab::{
+    resize_by_eighths, CellGrid, ListPlan, NeighbourBlock, NeighbourCountsInPass, Neighbours,
+    BLOCK, REACH,
+};
 use sph_core::world::{
     archetype, column, column_kinds, column_mut, count, ensure_component, ColumnKinds, Joined,
 };
@@ -32,8 +39,16 @@ pub struct Params {
     /// Reorder the fluid particles by grid cell every this many calls (0: never), so
     /// neighbours are near in memory (`sort_particles.rs`). Changes sums only by
     /// round-off (the order of terms); results stay identical for any thread count.
-    /// Default 20.
+    /// Default 20. With a skin, the sort waits for the first rebuild of the lists at
+    /// least this many calls after the last sort (it renumbers the particles, so it can
+    /// only run when the lists are rebuilt).
     pub sort_every: u32,
+    /// The lists' skin, in particle spacings ds: they hold the pairs within the kernel
+    /// support plus the skin and are rebuilt once a particle has moved half the skin
+    /// (0: rebuilt every step). Default 0.3: on the 80,000-particle dam break a wider
+    /// skin lengthens every pair loop by more than the rarer rebuilds save
+    /// (docs/performance.md, "Sixth round").
+    pub skin: f64,
 }
 
 impl Default for Params {
@@ -41,6 +56,7 @@ impl Default for Params {
         Self {
             count: true,
             sort_every: 20,
+            skin: 0.3,
         }
     }
 }
@@ -50,10 +66,17 @@ pub fn register(registry: &mut StageRegistry) {
         "neighbour_grid",
         "cell-linked list; neighbour lists of the fluid particles",
         |p: Params| {
+            if !(p.skin >= 0.0 && p.skin <= 10.0) {
+                return Err(
+                    "field `skin` is out of range; accepted: 0 to 10 particle spacings".into(),
+                );
+            }
             Ok(NeighbourGrid {
                 count: p.count,
                 sort_every: p.sort_every,
+                skin: p.skin,
                 calls: 0,
+                last_sort: None,
             })
         },
     );
@@ -62,7 +85,11 @@ pub fn register(registry: &mut StageRegistry) {
 pub struct NeighbourGrid {
     count: bool,
     sort_every: u32,
+    /// In particle spacings.
+    skin: f64,
     calls: u64,
+    /// The call at which the particles were last sorted.
+    last_sort: Option<u64>,
 }
 
 // Cells per kernel support (`vocab::REACH`). With 2 (cells of half the support
@@ -102,6 +129,33 @@ fn rebuild(grid: &mut CellGrid, positions: Joined<Position>) {
         });
 }
 
+/// Moves the ghosts (indices from `n_fluid` on) of a neighbour list after its fluid
+/// particles, each part in its order, so a pass can sum the ghost neighbours apart
+/// (the walls' work) without a second loop.
+fn ghosts_last(list: &mut [u32], n_fluid: u32) {
+    let mut ghosts = [0u32; 64];
+    if list.iter().filter(|&&j| j >= n_fluid).count() > ghosts.len() {
+        // More ghosts than the buffer holds (no kernel support does at the shipped
+        // h/ds): on the heap.
+        let (mut fluid, ghosts): (Vec<u32>, Vec<u32>) = list.iter().partition(|&&j| j < n_fluid);
+        fluid.extend(ghosts);
+        list.copy_from_slice(&fluid);
+        return;
+    }
+    let (mut fluid, mut g) = (0, 0);
+    for k in 0..list.len() {
+        let j = list[k];
+        if j < n_fluid {
+            list[fluid] = j;
+            fluid += 1;
+        } else {
+            ghosts[g] = j;
+            g += 1;
+        }
+    }
+    list[fluid..].copy_from_slice(&ghosts[..g]);
+}
+
 impl Stage for NeighbourGrid {
     fn name(&self) -> &'static str {
         "neighbour_grid"
@@ -124,26 +178,64 @@ impl Stage for NeighbourGrid {
                 ),
             ));
         }
-        sim.resources.insert(Neighbours::default());
+        sim.resources.insert(Neighbours {
+            support,
+            skin: self.skin * sim.constants.spacing,
+            ..Default::default()
+        });
         Ok(())
     }
 
-    /// The call counter, which decides when the particles are next sorted.
-    fn save_state(&mut self, _sim: &Sim) -> Result<Vec<u8>, StepError> {
+    /// The call counter and the last sort, which decide when the particles are next
+    /// sorted, and the positions the lists were built from.
+    fn save_state(&mut self, sim: &Sim) -> Result<Vec<u8>, StepError> {
         let mut e = Enc::default();
         e.u64(self.calls);
+        e.u64(self.last_sort.map_or(u64::MAX, |c| c));
+        let (n_fluid, built) = sim
+            .resources
+            .get::<Neighbours>()
+            .map_or((0, &[][..]), |nb| (nb.n_fluid, &nb.built_at[..]));
+        e.u64(n_fluid as u64);
+        e.u64(built.len() as u64);
+        for p in built {
+            e.f64(p.x);
+            e.f64(p.y);
+        }
         Ok(e.into_bytes())
     }
 
-    fn load_state(&mut self, _sim: &mut Sim, state: &[u8]) -> Result<(), sph_core::StateError> {
+    /// Restores the counters and rebuilds the lists from the positions of their last
+    /// build, so they are the uninterrupted run's.
+    fn load_state(&mut self, sim: &mut Sim, state: &[u8]) -> Result<(), sph_core::StateError> {
         let mut d = Dec::new(state);
         self.calls = d.u64()?;
-        d.end()
+        self.last_sort = Some(d.u64()?).filter(|&c| c != u64::MAX);
+        let n_fluid = d.u64()? as usize;
+        let n = d.len(16)?;
+        if n_fluid > n {
+            return Err(sph_core::StateError::Mismatch(format!(
+                "the neighbour lists' build holds {n} particles, fewer than its {n_fluid} fluid particles"
+            )));
+        }
+        let mut built = Vec::with_capacity(n);
+        for _ in 0..n {
+            built.push(Position(DVec2::new(d.f64()?, d.f64()?)));
+        }
+        d.end()?;
+        let mut nb = sim.resources.take::<Neighbours>().unwrap_or_default();
+        if n > 0 {
+            let (f, g) = built.split_at(n_fluid);
+            self.lists(sim, &mut nb, f, g);
+        }
+        sim.resources.insert(nb);
+        Ok(())
     }
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
         let mut nb = sim.resources.take::<Neighbours>().unwrap_or_default();
-        let result = self.build(sim, &mut nb);
+        let result = self.step(sim, &mut nb);
+        nb.plan = ListPlan::Undecided;
         sim.resources.insert(nb);
         result
     }
@@ -160,64 +252,141 @@ impl Stage for NeighbourGrid {
 }
 
 impl NeighbourGrid {
-    fn build(&mut self, sim: &mut Sim, nb: &mut Neighbours) -> Result<(), StepError> {
-        let support = sim.constants.support();
-        // The grid must also cover ghosts, which lie up to one support outside the walls.
-        let (lo, hi) = sim.constants.domain;
-        let pad = DVec2::splat(support);
-        nb.grid.shape((lo - pad, hi + pad), support / REACH as f64);
-        if self.sort_every > 0 && self.calls.is_multiple_of(self.sort_every as u64) {
-            let _span = tracing::info_span!("sort").entered();
-            let kinds = sim
-                .resources
-                .get::<ColumnKinds>()
-                .ok_or_else(|| StepError::Internal("NeighbourGrid ran without its setup".into()))?;
-            // The sort borrows the grid's buffers, which `rebuild` overwrites below; sized
-            // first for the rebuild (fluid and ghosts), or the sort's fluid-only size
-            // and the rebuild's growth would double them.
-            let grid = &mut nb.grid;
-            let joint = count::<Fluid>(&sim.world) + count::<Ghost>(&sim.world);
-            for buffer in [&mut grid.cells, &mut grid.particles] {
-                buffer.reserve_exact(joint.saturating_sub(buffer.len()));
+    /// Rebuilds the lists when they are outdated (sorting the particles first when a
+    /// sort is due), and counts the neighbours within the support.
+    fn step(&mut self, sim: &mut Sim, nb: &mut Neighbours) -> Result<(), StepError> {
+        let rebuild = match nb.plan {
+            ListPlan::Rebuild => true,
+            ListPlan::Keep => false,
+            ListPlan::Undecided => {
+                let fluid = archetype::<Fluid>(&sim.world);
+                let ghost = archetype::<Ghost>(&sim.world);
+                let fpos = fluid.map(column::<Position>).transpose()?;
+                let gpos = ghost.map(column::<Position>).transpose()?;
+                nb.outdated(
+                    fpos.as_deref().unwrap_or(&[]),
+                    gpos.as_deref().unwrap_or(&[]),
+                )
             }
-            let (mut cells, mut start, mut order) = (
-                std::mem::take(&mut grid.cells),
-                std::mem::take(&mut grid.start),
-                std::mem::take(&mut grid.particles),
-            );
-            let shape = &*grid;
-            let sorted = sort_by_cell(
-                &sim.world,
-                kinds,
-                shape.nx * shape.ny,
-                |x| shape.index_of(x),
-                SortBuffers {
-                    cells: &mut cells,
-                    start: &mut start,
-                    order: &mut order,
-                },
-            );
-            (grid.cells, grid.start, grid.particles) = (cells, start, order);
-            let sorted = sorted?;
-            if !sorted {
-                sim.diagnostics.insert("cell_sort_skipped".into(), 1.0);
+        };
+        let call = self.calls;
+        self.calls += 1;
+        nb.calls += 1;
+        nb.age += 1;
+        if rebuild {
+            let due = self.sort_every > 0
+                && self
+                    .last_sort
+                    .is_none_or(|last| call - last >= self.sort_every as u64);
+            if due {
+                self.last_sort = Some(call);
+                self.sort(sim, nb)?;
             }
         }
-        self.calls += 1;
         let Some(fluid) = archetype::<Fluid>(&sim.world) else {
             return Ok(());
         };
         let ghost = archetype::<Ghost>(&sim.world);
         let fpos = column::<Position>(fluid)?;
         let gpos = ghost.map(column::<Position>).transpose()?;
-        let positions = Joined::new(&fpos[..], gpos.as_deref().unwrap_or(&[]));
-        nb.n_fluid = fpos.len();
-        nb.n_ghost = positions.len() - fpos.len();
-        nb.support = support;
-        rebuild(&mut nb.grid, positions);
+        let gpos = gpos.as_deref().unwrap_or(&[]);
+        if rebuild {
+            self.lists(sim, nb, &fpos, gpos);
+        }
+        // With a skin, `Forces` counts the neighbours within the support in its own
+        // loop when it is in the pipeline (`NeighbourCountsInPass`).
+        let skin = nb.skin > 0.0;
+        if self.count && !(skin && sim.resources.contains::<NeighbourCountsInPass>()) {
+            let _span = tracing::info_span!("count").entered();
+            let mut counts = column_mut::<NeighbourCount>(fluid)?;
+            let fpos: &[Position] = &fpos;
+            let within = Joined::new(fpos, gpos);
+            let r2 = nb.support * nb.support;
+            counts
+                .par_chunks_mut(BLOCK)
+                .zip(nb.blocks.par_iter())
+                .enumerate()
+                .for_each(|(b, (counts, block))| {
+                    for (k, (c, w)) in counts.iter_mut().zip(block.offsets.windows(2)).enumerate() {
+                        let list = &block.list[w[0] as usize..w[1] as usize];
+                        // Without a skin every listed pair is within the support.
+                        c.0 = if skin {
+                            let x = fpos[b * BLOCK + k].0;
+                            list.iter()
+                                .filter(|&&j| x.distance_squared(within.get(j).0) < r2)
+                                .count() as u32
+                        } else {
+                            list.len() as u32
+                        };
+                    }
+                });
+        }
+        Ok(())
+    }
 
-        let fpos: &[Position] = &fpos;
-        let r2max = support * support;
+    /// Reorders the fluid particles by the cells of the grid about to be built.
+    fn sort(&self, sim: &mut Sim, nb: &mut Neighbours) -> Result<(), StepError> {
+        let _span = tracing::info_span!("sort").entered();
+        self.shape(sim, nb);
+        let kinds = sim
+            .resources
+            .get::<ColumnKinds>()
+            .ok_or_else(|| StepError::Internal("NeighbourGrid ran without its setup".into()))?;
+        // The sort borrows the grid's buffers, which the rebuild overwrites; sized
+        // first for the rebuild (fluid and ghosts), or the sort's fluid-only size and
+        // the rebuild's growth would double them.
+        let grid = &mut nb.grid;
+        let joint = count::<Fluid>(&sim.world) + count::<Ghost>(&sim.world);
+        for buffer in [&mut grid.cells, &mut grid.particles] {
+            buffer.reserve_exact(joint.saturating_sub(buffer.len()));
+        }
+        let (mut cells, mut start, mut order) = (
+            std::mem::take(&mut grid.cells),
+            std::mem::take(&mut grid.start),
+            std::mem::take(&mut grid.particles),
+        );
+        let shape = &*grid;
+        let sorted = sort_by_cell(
+            &sim.world,
+            kinds,
+            shape.nx * shape.ny,
+            |x| shape.index_of(x),
+            SortBuffers {
+                cells: &mut cells,
+                start: &mut start,
+                order: &mut order,
+            },
+        );
+        (grid.cells, grid.start, grid.particles) = (cells, start, order);
+        if !sorted? {
+            sim.diagnostics.insert("cell_sort_skipped".into(), 1.0);
+        }
+        Ok(())
+    }
+
+    /// Shapes the grid: cells of the lists' reach (support and skin) over the domain
+    /// and the ghosts beyond its walls.
+    fn shape(&self, sim: &Sim, nb: &mut Neighbours) {
+        nb.support = sim.constants.support();
+        nb.skin = self.skin * sim.constants.spacing;
+        let reach = nb.reach();
+        let (lo, hi) = sim.constants.domain;
+        let pad = DVec2::splat(reach);
+        nb.grid.shape((lo - pad, hi + pad), reach / REACH as f64);
+    }
+
+    /// Builds the grid and the lists of the particles at `fpos` and `gpos` (fluid and
+    /// ghosts), and records the positions.
+    fn lists(&self, sim: &Sim, nb: &mut Neighbours, fpos: &[Position], gpos: &[Position]) {
+        self.shape(sim, nb);
+        nb.builds += 1;
+        nb.age = 0;
+        nb.n_fluid = fpos.len();
+        nb.n_ghost = gpos.len();
+        let positions = Joined::new(fpos, gpos);
+        rebuild(&mut nb.grid, positions);
+        let reach = nb.reach();
+        let r2max = reach * reach;
         let grid = &nb.grid;
         let n = nb.n_fluid;
         nb.blocks
@@ -227,21 +396,43 @@ impl NeighbourGrid {
             nb.blocks.par_iter_mut().enumerate().for_each(|(b, block)| {
                 let range = b * BLOCK..((b + 1) * BLOCK).min(n);
                 scan.build_block(grid, fpos, r2max, range, block);
+                for w in block.offsets.windows(2) {
+                    ghosts_last(&mut block.list[w[0] as usize..w[1] as usize], n as u32);
+                }
             })
         });
         nb.blocks.truncate(n.div_ceil(BLOCK));
-        if self.count {
-            let _span = tracing::info_span!("count").entered();
-            let mut counts = column_mut::<NeighbourCount>(fluid)?;
-            counts
-                .par_chunks_mut(BLOCK)
-                .zip(nb.blocks.par_iter())
-                .for_each(|(counts, block)| {
-                    for (c, w) in counts.iter_mut().zip(block.offsets.windows(2)) {
-                        c.0 = w[1] - w[0];
-                    }
-                });
+        if nb.skin > 0.0 {
+            // Lists that last need the scan's position copies and the cell scratch only
+            // at their rebuilds: freed between them (20 bytes a particle, about what
+            // the positions of the build take).
+            let g = &mut nb.grid;
+            (g.xs, g.ys, g.cells) = (Vec::new(), Vec::new(), Vec::new());
         }
-        Ok(())
+        let joint = fpos.len() + gpos.len();
+        resize_by_eighths(&mut nb.built_at, joint, DVec2::ZERO);
+        let (f, g) = nb.built_at.split_at_mut(fpos.len());
+        f.par_iter_mut().zip(fpos).for_each(|(b, p)| *b = p.0);
+        g.par_iter_mut().zip(gpos).for_each(|(b, p)| *b = p.0);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ghosts_last;
+
+    #[test]
+    fn ghosts_go_last_in_their_order() {
+        let mut list = [7, 12, 3, 10, 1, 11];
+        ghosts_last(&mut list, 10);
+        assert_eq!(list, [7, 3, 1, 12, 10, 11]);
+        // More ghosts than the stack buffer.
+        let mut long: Vec<u32> = (0..200)
+            .map(|k| if k % 3 == 0 { 1000 + k } else { k })
+            .collect();
+        let (mut fluid, ghosts): (Vec<u32>, Vec<u32>) = long.iter().partition(|&&j| j < 1000);
+        fluid.extend(ghosts);
+        ghosts_last(&mut long, 1000);
+        assert_eq!(long, fluid);
     }
 }

@@ -140,6 +140,7 @@ pub fn register(registry: &mut StageRegistry) {
                 filters: Vec::new(),
                 guard_counts: [0.0; 2],
                 out: None,
+                scratch: Default::default(),
             })
         },
     );
@@ -160,6 +161,8 @@ pub struct Probe {
     /// The guard diagnostics ([`GUARD_COUNTS`]) at the previous sample.
     guard_counts: [f64; 2],
     out: Option<SeriesWriter>,
+    /// Method III's buffers, reused from reading to reading.
+    scratch: std::cell::RefCell<Scratch>,
 }
 
 /// The cumulative guard counters of `Sim::diagnostics` (written by `Integrate`) and the
@@ -637,7 +640,15 @@ impl Probe {
                     along: s.along + offset,
                     ..s.clone()
                 };
-                averaged(sim, &x, &p, wall, &shifted, carry)
+                averaged(
+                    sim,
+                    &x,
+                    &p,
+                    wall,
+                    &shifted,
+                    carry,
+                    &mut self.scratch.borrow_mut(),
+                )
             }
         })
     }
@@ -768,16 +779,44 @@ pub fn roll_moment(x: &[Position], a: &[Acceleration], m: &[Mass], centre: DVec2
         .sum()
 }
 
-/// Method II: the nearest fluid particle within the kernel support.
+/// The neighbour grid when it indexes exactly these fluid particles (it is built
+/// after the positions of the step a probe reads), for point queries instead of a scan
+/// of every particle (two sensors, read every step for their time filters, scanned
+/// 21 ns per particle-step at 80k).
+fn grid_of(sim: &Sim, n_fluid: usize) -> Option<&Neighbours> {
+    sim.resources
+        .get::<Neighbours>()
+        .filter(|nb| nb.n_fluid == n_fluid && !nb.grid.start.is_empty())
+}
+
+/// Method II: the nearest fluid particle within the kernel support (the lowest index
+/// among equally near ones).
 fn nearest(sim: &Sim, x: &[Position], p: &[Pressure], at: DVec2, carry: Carry) -> f64 {
     let support2 = sim.constants.support().powi(2);
-    let best = x
-        .iter()
-        .enumerate()
-        .map(|(i, q)| (i, (q.0 - at).length_squared()))
-        .filter(|&(_, d2)| d2 < support2)
-        .min_by(|a, b| a.1.total_cmp(&b.1));
-    best.map_or(0.0, |(i, _)| carry.carry(p[i].0, x[i].0, at))
+    let mut best: Option<(f64, usize)> = None;
+    let mut consider = |i: usize| {
+        let d2 = (x[i].0 - at).length_squared();
+        if d2 < support2 && best.is_none_or(|b| (d2, i) < b) {
+            best = Some((d2, i));
+        }
+    };
+    match grid_of(sim, x.len()) {
+        // Every particle within the support of `at` is in the cells around it.
+        Some(nb) => nb.grid.for_each_near(at, |j| {
+            if (j as usize) < x.len() {
+                consider(j as usize)
+            }
+        }),
+        None => (0..x.len()).for_each(consider),
+    }
+    best.map_or(0.0, |(_, i)| carry.carry(p[i].0, x[i].0, at))
+}
+
+/// Method III's candidates and samples.
+#[derive(Default)]
+struct Scratch {
+    candidates: Vec<u32>,
+    samples: Vec<(f64, f64)>,
 }
 
 /// Method III: Oger's pseudo-sensor.
@@ -788,21 +827,46 @@ fn averaged(
     wall: &WallPose,
     s: &PressureSensor,
     carry: Carry,
+    scratch: &mut Scratch,
 ) -> f64 {
     let reach = 1.5 * sim.constants.h;
     let centre = s.along;
     let (lo, hi) = (centre - 0.5 * s.width, centre + 0.5 * s.width);
-    let mut samples: Vec<(f64, f64)> = x
-        .iter()
-        .zip(p)
-        .filter_map(|(q, pq)| {
-            let (d, a) = (wall.distance(q.0), wall.abscissa(q.0));
-            ((0.0..reach).contains(&d) && (lo..=hi).contains(&a)).then(|| {
-                let on_wall = q.0 - d * wall.normal();
-                (a, carry.carry(pq.0, q.0, on_wall))
-            })
+    let sample = |i: usize| {
+        let q = x[i].0;
+        let (d, a) = (wall.distance(q), wall.abscissa(q));
+        ((0.0..reach).contains(&d) && (lo..=hi).contains(&a)).then(|| {
+            let on_wall = q - d * wall.normal();
+            (a, carry.carry(p[i].0, q, on_wall))
         })
-        .collect();
+    };
+    let Scratch {
+        samples,
+        candidates,
+    } = scratch;
+    samples.clear();
+    match grid_of(sim, x.len()) {
+        // The cells around points every h/2 along the face hold every particle within
+        // 1.5 h of it (a cell is at least a support wide); taken in index order, as the
+        // scan of all particles takes them, so the stable sort below gives the same list.
+        Some(nb) => {
+            candidates.clear();
+            let points = ((hi - lo) / (0.5 * sim.constants.h)).ceil().clamp(1.0, 1e4) as usize;
+            for k in 0..=points {
+                let at = wall.point(lo + (hi - lo) * k as f64 / points as f64);
+                nb.grid.for_each_near(at, |j| {
+                    if (j as usize) < x.len() {
+                        candidates.push(j)
+                    }
+                });
+            }
+            candidates.sort_unstable();
+            candidates.dedup();
+            samples.extend(candidates.iter().filter_map(|&i| sample(i as usize)));
+        }
+        None => samples.extend((0..x.len()).filter_map(sample)),
+    }
+    let samples = &mut samples[..];
     if samples.is_empty() {
         return 0.0;
     }

@@ -3,12 +3,13 @@
 //! the results written into the particle columns.
 
 use crate::terms::{Fixed, RateTerms, TermBit};
+use crate::wall_work;
 use rayon::prelude::*;
 use sph_core::components::{
-    Acceleration, Density, DensityRate, Mass, Position, Pressure, Velocity,
+    Acceleration, Density, DensityRate, Mass, NeighbourCount, Position, Pressure, Velocity,
 };
 use sph_core::contract::Access;
-use sph_core::pair::{with_records, EquationsOfMotion, Field, Fields, Pass, RateTerm};
+use sph_core::pair::{with_records, Counted, EquationsOfMotion, Field, Fields, Pass, RateTerm};
 use sph_core::sim::Sim;
 use sph_core::stage::StepError;
 use sph_core::vocab::Neighbours;
@@ -38,6 +39,14 @@ pub(crate) struct Outputs {
     pub density_rate: bool,
     /// The energy rates ([`Power`]), returned.
     pub power: bool,
+    /// The walls' power on the fluid into [`Power::wall`], from the sums over each
+    /// particle's ghost neighbours (the lists put them last), which the pass then adds
+    /// to the fluid neighbours' sums: no second pass. The terms must include
+    /// continuity (`wall_work.rs`).
+    pub wall: bool,
+    /// Each particle's neighbours within the support into `NeighbourCount`, counted in
+    /// the same loop (lists with a skin hold more).
+    pub counts: bool,
 }
 
 /// The energy rates of a pass [W per metre of depth].
@@ -48,6 +57,8 @@ pub(crate) struct Power {
     /// The rate at which density diffusion changes the internal energy,
     /// sum_i m_i (p_i/rho_i^2) D_i.
     pub diffusion: f64,
+    /// The walls' power on the fluid (`wall_work.rs`), when asked.
+    pub wall: f64,
 }
 
 /// Sums `terms` for every fluid particle and writes `out`; returns the energy rates
@@ -118,12 +129,15 @@ fn run_set<R: RateTerm + Copy>(
     out: Outputs,
     chunk_power: &mut Vec<Power>,
 ) -> Result<Power, StepError> {
-    let eom = EquationsOfMotion(terms);
     let power = with_records(sim, terms.reads(), |sim, particles, records| {
         let Some(nb) = sim.resources.get::<Neighbours>() else {
             return Ok(Power::default());
         };
         let n = nb.n_fluid;
+        let eom = Counted {
+            term: EquationsOfMotion(terms),
+            radius: nb.support,
+        };
         let mut acc = match out.acceleration {
             true => Some(particles.fluid_mut::<Acceleration>()?),
             false => None,
@@ -132,9 +146,23 @@ fn run_set<R: RateTerm + Copy>(
             true => Some(particles.fluid_mut::<DensityRate>()?),
             false => None,
         };
+        let mut counts = match out.counts {
+            true => Some(particles.fluid_mut::<NeighbourCount>()?),
+            false => None,
+        };
+        let state = match out.wall {
+            true => Some((
+                particles.fluid::<Velocity>()?,
+                particles.fluid::<Density>()?,
+                particles.fluid::<Mass>()?,
+            )),
+            false => None,
+        };
         let lens = [
             acc.as_ref().map(|a| a.len()),
             rate.as_ref().map(|r| r.len()),
+            counts.as_ref().map(|c| c.len()),
+            state.as_ref().map(|s| s.0.len()),
         ];
         if let Some(len) = lens.into_iter().flatten().find(|&len| len != n) {
             return Err(StepError::Internal(format!(
@@ -143,27 +171,57 @@ fn run_set<R: RateTerm + Copy>(
         }
         let acc: &mut [Acceleration] = acc.as_deref_mut().unwrap_or(&mut []);
         let rate: &mut [DensityRate] = rate.as_deref_mut().unwrap_or(&mut []);
+        let counts: &mut [NeighbourCount] = counts.as_deref_mut().unwrap_or(&mut []);
+        let state = state.as_ref().map(|(v, rho, m)| (&v[..], &rho[..], &m[..]));
         let chunks = n.div_ceil(CHUNK);
         chunk_power.clear();
-        chunk_power.resize(if out.power { chunks } else { 0 }, Power::default());
+        chunk_power.resize(
+            if out.power || out.wall { chunks } else { 0 },
+            Power::default(),
+        );
         let (c, g) = (&sim.constants, sim.constants.gravity);
+        let eos = c.eos;
         with_kernel!(c.kernel, c.h, |k| {
             let pass =
                 Pass::new(&eom, k, records).map_err(|e| StepError::Internal(e.to_string()))?;
             optional_pieces(acc, n, CHUNK)
                 .zip(optional_pieces(rate, n, CHUNK))
+                .zip(optional_pieces(counts, n, CHUNK))
                 .zip(optional_pieces(&mut chunk_power[..], chunks, 1))
                 .enumerate()
-                .for_each(|(c, ((mut acc, mut rate), power))| {
+                .for_each(|(c, (((mut acc, mut rate), mut counts), power))| {
                     let mut sum = Power::default();
                     for k in 0..(n - c * CHUNK).min(CHUNK) {
                         let i = c * CHUNK + k;
-                        let s = pass.sum(i, nb.of(i));
+                        let list = nb.of(i);
+                        // The ghost neighbours, last in the list, summed apart (for the
+                        // walls' power; always, so that every rate stage adds a
+                        // particle's pairs in the same order).
+                        let ghosts = match list.last() {
+                            Some(&j) if j as usize >= n => {
+                                list.partition_point(|&j| (j as usize) < n)
+                            }
+                            _ => list.len(),
+                        };
+                        let (s, count) = if ghosts == list.len() {
+                            pass.sum(i, list)
+                        } else {
+                            let (f, cf) = pass.sum(i, &list[..ghosts]);
+                            let (w, cw) = pass.sum(i, &list[ghosts..]);
+                            if let Some((v, rho, m)) = state {
+                                sum.wall +=
+                                    wall_work::particle_power(&eos, m[i].0, v[i].0, rho[i].0, &w);
+                            }
+                            (f + w, cf + cw)
+                        };
                         if let Some(a) = acc.as_deref_mut() {
                             a[k].0 = s.acc + g;
                         }
                         if let Some(r) = rate.as_deref_mut() {
                             r[k].0 = s.drho;
+                        }
+                        if let Some(n) = counts.as_deref_mut() {
+                            n[k].0 = count;
                         }
                         sum.viscous += s.power;
                         sum.diffusion += s.diffusion;
@@ -177,6 +235,7 @@ fn run_set<R: RateTerm + Copy>(
         Ok(chunk_power.iter().fold(Power::default(), |a, p| Power {
             viscous: a.viscous + p.viscous,
             diffusion: a.diffusion + p.diffusion,
+            wall: a.wall + p.wall,
         }))
     })?;
     Ok(power.unwrap_or_default())

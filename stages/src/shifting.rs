@@ -49,7 +49,7 @@ use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{require_neighbours, Neighbours};
 use sph_core::with_kernel;
-use sph_core::world::{archetype, column_mut};
+use sph_core::world::{archetype, column, column_mut};
 use sph_core::StageRegistry;
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -246,6 +246,13 @@ impl Shifting {
         let Some(nb) = sim.resources.get::<Neighbours>() else {
             return Ok(0);
         };
+        let Some(fluid) = archetype::<Fluid>(&sim.world) else {
+            return Ok(0);
+        };
+        let x = column::<Position>(fluid)?;
+        let x: &[Position] = &x;
+        // The lists may hold pairs beyond the support (their skin).
+        let support2 = nb.support * nb.support;
         let n = self.sums.len();
         let p = &self.params;
         self.surface.clear();
@@ -270,11 +277,10 @@ impl Shifting {
                 // only along the surface.
                 if surface[i] {
                     dr = DVec2::ZERO;
-                } else if nb
-                    .of(i)
-                    .iter()
-                    .any(|&j| (j as usize) < n && surface[j as usize])
-                {
+                } else if nb.of(i).iter().any(|&j| {
+                    let j = j as usize;
+                    j < n && surface[j] && x[i].0.distance_squared(x[j].0) < support2
+                }) {
                     dr -= dr.dot(s.normal) * s.normal;
                 }
                 let len = dr.length();

@@ -15,13 +15,18 @@
 //! Tait pressure of rho_i (the slope of the internal energy). Summed over the fluid,
 //! that is the power the walls put in: zero for a still wall up to the mirror's
 //! imperfections, the pressure times the wall's normal speed for a moving one. The
-//! terms are the forces' own, with the continuity term added if the forces do not sum
-//! it (a `Continuity()` stage then does).
+//! terms are the forces' own. When they include continuity, the forces' pass sums each
+//! particle's ghost neighbours (last in its list) apart and adds them to the rest, so
+//! these sums cost no pass of their own ([`particle_power`]); otherwise (a
+//! `Continuity()` stage sums the density rate) [`power`] runs the terms with continuity
+//! added over the ghost neighbours alone.
 
 use crate::terms::{continuity, RateTerms};
+use glam::DVec2;
 use sph_core::components::{Density, Mass, Velocity};
-use sph_core::pair::{with_records, EquationsOfMotion, Pass, RateTerm};
+use sph_core::pair::{with_records, EquationsOfMotion, Pass, RateSums, RateTerm};
 use sph_core::sim::Sim;
+use sph_core::sim::Tait;
 use sph_core::stage::StepError;
 use sph_core::vocab::Neighbours;
 use sph_core::with_kernel;
@@ -82,14 +87,18 @@ pub(crate) fn power(sim: &mut Sim, terms: &RateTerms) -> Result<f64, StepError> 
                     heap.extend(list.iter().copied().filter(|&j| j as usize >= n));
                     &heap
                 };
-                let s = pass.sum(i, ghosts);
-                let r = rho[i].0;
-                // A density diffusion's share of the ghost pairs is booked apart
-                // (`vocab::DiffusionPower`), so it is taken out here.
-                m[i].0 * (s.acc.dot(v[i].0) + eos.pressure(r) / (r * r) * s.drho) + s.power
-                    - s.diffusion
+                particle_power(&eos, m[i].0, v[i].0, rho[i].0, &pass.sum(i, ghosts))
             }))
         })
     })?;
     Ok(power.unwrap_or(0.0))
+}
+
+/// The walls' power on fluid particle i (mass `m`, velocity `v`, density `rho`) from
+/// `s`, the rates its ghost neighbours alone give (continuity included).
+#[inline]
+pub(crate) fn particle_power(eos: &Tait, m: f64, v: DVec2, rho: f64, s: &RateSums) -> f64 {
+    // A density diffusion's share of the ghost pairs is booked apart
+    // (`vocab::DiffusionPower`), so it is taken out here.
+    m * (s.acc.dot(v) + eos.pressure(rho) / (rho * rho) * s.drho) + s.power - s.diffusion
 }

@@ -26,6 +26,8 @@ fn scenario() -> sph_scenario::Scenario {
         &[
             "resolution=ParticlesAcross(20)",
             "end_time=0.05",
+            // Lists rebuilt every step, so the grid's inner spans run every step.
+            "pipeline.neighbour_grid.skin=0",
             "pipeline.probe.plots=false",
             "pipeline.energy.plots=false",
             "pipeline.snapshots.times=[]",

@@ -5,13 +5,15 @@
 //! and absurd sizes are refused before the run with a message naming the culprit.
 
 use sph_core::checkpoint::{read_latest, LATEST, PREVIOUS, TEMPORARY};
-use sph_run::runner::{run, RunOptions};
+use sph_core::vocab::Neighbours;
+use sph_run::runner::{run, run_keeping_state, RunOptions};
 use sph_scenario::Scenario;
 use sph_tests::support::{load, temp_out};
 use std::path::{Path, PathBuf};
 
 const WAVE: &str = include_str!("../../scenarios/wave_maker.ron");
 const SLOSHING: &str = include_str!("../../scenarios/sloshing.ron");
+const DAM: &str = include_str!("../../scenarios/dam_break.ron");
 const DAM_BREAK_DFSPH: &str = include_str!("../../scenarios/dam_break_dfsph.ron");
 
 /// A coarse wave maker: 630 particles, the piston moving from the start, particles
@@ -37,6 +39,8 @@ const SLOSHING_COARSE: [&str; 6] = [
     "tank.motion.ramp=0.0",
 ];
 
+/// The series and frame indexes a resumed run must write as the uninterrupted one.
+const EVERY_OUTPUT: [&str; 4] = ["probes.csv", "energy.csv", "frames.pvd", "walls.pvd"];
 /// A coarse DFSPH dam break: 800 particles sorted every 7 steps, to the first impact.
 const DFSPH_COARSE: [&str; 6] = [
     "resolution=ParticlesAcross(40)",
@@ -105,15 +109,6 @@ fn resume(scenario: Scenario, out: &Path, threads: usize) -> Vec<String> {
     notes
 }
 
-/// The two runs' series and frame indexes are byte-identical; removes both folders.
-fn same_outputs_then_clean(a: PathBuf, b: PathBuf) {
-    same_files_then_clean(
-        a,
-        b,
-        &["probes.csv", "energy.csv", "frames.pvd", "walls.pvd"],
-    );
-}
-
 /// The two runs' `files` are byte-identical; removes both folders.
 fn same_files_then_clean(a: PathBuf, b: PathBuf, files: &[&str]) {
     for &f in files {
@@ -150,7 +145,7 @@ fn a_resumed_piston_run_is_bit_identical() {
     // 0.3 s is not a multiple of Reinitialise(every: 20) x 1 ms: the stop waits for one.
     let part = stopped(wave(), "restart-wave-part", None, 0.29);
     resume(wave(), &part, 1);
-    same_outputs_then_clean(full, part);
+    same_files_then_clean(full, part, &EVERY_OUTPUT);
 }
 
 #[test]
@@ -175,7 +170,7 @@ fn a_resumed_rolling_tank_is_bit_identical_and_a_damaged_checkpoint_falls_back()
     // The moved damaged file no longer masks the previous one.
     let notes = resume(sloshing(), &part, 1);
     assert!(notes.is_empty(), "{notes:?}");
-    same_outputs_then_clean(full, part);
+    same_files_then_clean(full, part, &EVERY_OUTPUT);
 }
 
 #[test]
@@ -327,4 +322,43 @@ fn unwritable_outputs_are_reported_with_the_file_name(
     assert!(err.contains(TEMPORARY) && err.contains(reason), "{err}");
     assert!(!out.join(LATEST).exists());
     let _ = std::fs::remove_dir_all(&out);
+}
+
+/// A dam break whose neighbour lists last several steps (the skin), stopped while a
+/// list is in use and resumed: the resumed run rebuilds the same lists from the
+/// checkpoint and keeps them as long, so its outputs are byte-identical.
+#[test]
+fn a_dam_break_resumed_in_the_middle_of_a_neighbour_list_is_bit_identical() {
+    let coarse = [
+        "resolution=ParticlesAcross(30)",
+        "end_time=0.3",
+        "pipeline.vtk_frames.interval=0.1",
+        "pipeline.probe.plots=false",
+        "pipeline.energy.plots=false",
+    ];
+    let dam = || load(DAM, "scenarios/dam_break.ron", &coarse);
+    let full = uninterrupted(dam(), "restart-dam-full");
+    let part = temp_out("restart-dam-part");
+    let opts = RunOptions {
+        stop_at: Some(0.13),
+        ..options(&part, 2)
+    };
+    let (summary, sim) = run_keeping_state(dam(), &opts).unwrap_or_else(|e| panic!("{e}"));
+    assert!(summary.status.starts_with("paused"), "{}", summary.status);
+    let nb = sim.resources.get::<Neighbours>().expect("neighbour lists");
+    assert!(nb.skin > 0.0);
+    assert!(
+        nb.calls > 3 * nb.builds,
+        "the lists should last several steps: {} steps, {} builds",
+        nb.calls,
+        nb.builds
+    );
+    assert!(
+        nb.age > 0,
+        "the stop should fall in the middle of a list's life"
+    );
+    drop(sim);
+    resume(dam(), &part, 1);
+    // A fixed tank writes no walls.pvd.
+    same_files_then_clean(full, part, &EVERY_OUTPUT[..3]);
 }

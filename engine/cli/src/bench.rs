@@ -9,11 +9,11 @@
 //! Benchmarks report; they never assert times.
 
 use serde::{Deserialize, Serialize};
-use sph_core::components::Fluid;
+use sph_core::components::{Fluid, Position};
 use sph_core::sim::Sim;
 use sph_core::stage::{Stage, StepError};
 use sph_core::vocab::Neighbours;
-use sph_core::world::count;
+use sph_core::world::{count, Particles};
 use sph_run::runner::{run_keeping_state, RunOptions};
 use sph_scenario::overrides::Override;
 use sph_scenario::Scenario;
@@ -106,6 +106,13 @@ pub struct Measurement {
     pub ghosts_mean: f64,
     /// Neighbour pairs at the last step times the steps: pair interactions per sweep.
     pub interactions: f64,
+    /// Steps per build of the neighbour lists (their mean age; 1 without a skin).
+    #[serde(default)]
+    pub rebuild_interval: f64,
+    /// Of the pairs in the lists at the end, the fraction within the kernel support
+    /// (the rest is the lists' skin, tested and skipped in every pair loop).
+    #[serde(default)]
+    pub pairs_kept: f64,
     /// (stage, seconds).
     pub stages: Vec<(String, f64)>,
     /// Peak resident memory of the process (VmHWM) [bytes].
@@ -309,10 +316,17 @@ pub fn run_case(
     let end_bytes = proc_status("VmRSS:");
     let heap_peak = heap_bytes().1;
     let heap_end = LIVE_WHILE_STEPPING.load(Ordering::Relaxed);
-    let pairs = sim
-        .resources
-        .get::<Neighbours>()
-        .map_or(0, |nb| nb.interactions());
+    let (pairs, pairs_kept, rebuild_interval) =
+        sim.resources
+            .get::<Neighbours>()
+            .map_or((0, 0.0, 0.0), |nb| {
+                let pairs = nb.interactions();
+                (
+                    pairs,
+                    within_support(&sim, nb) as f64 / pairs.max(1) as f64,
+                    nb.calls as f64 / nb.builds.max(1) as f64,
+                )
+            });
     let front = front_series(&out.join("probes.csv"));
     Ok(Measurement {
         particles: count::<Fluid>(&sim.world),
@@ -322,6 +336,8 @@ pub fn run_case(
         wall_seconds: summary.wall_seconds,
         ghosts_mean: summary.ghost_particles_mean,
         interactions: pairs as f64 * summary.steps as f64,
+        rebuild_interval,
+        pairs_kept,
         stages: summary
             .stages
             .iter()
@@ -336,6 +352,27 @@ pub fn run_case(
         front,
         diagnostics: summary.diagnostics,
     })
+}
+
+/// The pairs of the lists within the kernel support at the current positions.
+fn within_support(sim: &Sim, nb: &Neighbours) -> usize {
+    let Some(x) = Particles::of(&sim.world).and_then(|p| p.joined::<Position>().ok()) else {
+        return 0;
+    };
+    let x = x.view();
+    if x.len() < nb.n_fluid + nb.n_ghost {
+        return 0;
+    }
+    let r2 = nb.support * nb.support;
+    (0..nb.n_fluid)
+        .map(|i| {
+            let xi = x.get(i as u32).0;
+            nb.of(i)
+                .iter()
+                .filter(|&&j| xi.distance_squared(x.get(j).0) < r2)
+                .count()
+        })
+        .sum()
 }
 
 /// The `front` column of a probes.csv, if any.
@@ -508,7 +545,7 @@ fn efficiency(m: &Measurement, all: &[Measurement]) -> Option<f64> {
 }
 
 fn csv_table(fixed: &[Measurement], timed: &[Measurement]) -> String {
-    let mut out = String::from("kind,particles,threads,steps,simulated_time_s,wall_s,particle_steps_per_s,interactions_per_s,ghosts_mean,peak_rss_mib,rss_bytes_per_particle_peak,heap_bytes_per_particle_peak,heap_bytes_per_particle_steady,parallel_efficiency");
+    let mut out = String::from("kind,particles,threads,steps,simulated_time_s,wall_s,particle_steps_per_s,interactions_per_s,ghosts_mean,peak_rss_mib,rss_bytes_per_particle_peak,heap_bytes_per_particle_peak,heap_bytes_per_particle_steady,parallel_efficiency,rebuild_interval_steps,pairs_kept_per_tested");
     for s in SHOWN.iter().chain(OUTPUTS.iter()) {
         let _ = write!(out, ",{s}_pct");
     }
@@ -518,7 +555,7 @@ fn csv_table(fixed: &[Measurement], timed: &[Measurement]) -> String {
             let eff = efficiency(m, fixed).map_or(String::new(), |e| format!("{e:.3}"));
             let _ = write!(
                 out,
-                "{kind},{},{},{},{:.6},{:.3},{:.4e},{:.4e},{:.0},{:.1},{:.0},{:.1},{:.1},{eff}",
+                "{kind},{},{},{},{:.6},{:.3},{:.4e},{:.4e},{:.0},{:.1},{:.0},{:.1},{:.1},{eff},{:.2},{:.3}",
                 m.particles,
                 m.threads,
                 m.steps,
@@ -531,6 +568,8 @@ fn csv_table(fixed: &[Measurement], timed: &[Measurement]) -> String {
                 m.bytes_per_particle(),
                 m.heap_peak as f64 / m.particles.max(1) as f64,
                 m.steady_bytes_per_particle(),
+                m.rebuild_interval,
+                m.pairs_kept,
             );
             for s in SHOWN.iter().chain(OUTPUTS.iter()) {
                 let _ = write!(out, ",{:.2}", m.share(s));
@@ -549,12 +588,12 @@ fn markdown(fixed: &[Measurement], timed: &[Measurement], args: &BenchArgs) -> S
         args.repeats.max(1),
         std::thread::available_parallelism().map_or(0, |n| n.get())
     );
-    out += "| particles | threads | steps | wall [s] | particle-steps/s | interactions/s | peak RSS [MiB] | B/particle: peak RSS | peak heap | heap while stepping | parallel eff. |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+    out += "| particles | threads | steps | wall [s] | particle-steps/s | interactions/s | peak RSS [MiB] | B/particle: peak RSS | peak heap | heap while stepping | parallel eff. | list rebuild interval [steps] | pairs kept / tested |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
     for m in fixed {
         let eff = efficiency(m, fixed).map_or("-".into(), |e| format!("{:.0} %", 100.0 * e));
         let _ = writeln!(
             out,
-            "| {} | {} | {} | {:.2} | {:.3e} | {:.3e} | {:.0} | {:.0} | {:.0} | {:.0} | {eff} |",
+            "| {} | {} | {} | {:.2} | {:.3e} | {:.3e} | {:.0} | {:.0} | {:.0} | {:.0} | {eff} | {:.1} | {:.2} |",
             m.particles,
             m.threads,
             m.steps,
@@ -564,7 +603,9 @@ fn markdown(fixed: &[Measurement], timed: &[Measurement], args: &BenchArgs) -> S
             m.peak_bytes as f64 / 1048576.0,
             m.bytes_per_particle(),
             m.heap_peak as f64 / m.particles.max(1) as f64,
-            m.steady_bytes_per_particle()
+            m.steady_bytes_per_particle(),
+            m.rebuild_interval,
+            m.pairs_kept
         );
     }
     out += "\nPer-stage share of the step time [%]:\n\n| particles | threads |";

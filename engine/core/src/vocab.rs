@@ -157,16 +157,37 @@ pub struct NeighbourBlock {
     pub list: Vec<u32>,
 }
 
-/// The neighbour lists of one step: for every fluid particle the particles within the
-/// kernel support (joint numbering: fluid `0..n_fluid`, then ghosts), in a fixed order,
-/// kept in blocks of [`BLOCK`] particles that are built in parallel and reused from
-/// step to step. A resource of the [`Sim`], produced by the `NeighbourGrid` stage.
+/// The neighbour lists: for every fluid particle the particles within the kernel
+/// support and a skin beyond it at the lists' build (joint numbering: fluid
+/// `0..n_fluid`, then ghosts), in a fixed order, kept in blocks of [`BLOCK`] particles
+/// that are built in parallel and reused from step to step. A resource of the [`Sim`],
+/// produced by the `NeighbourGrid` stage.
+///
+/// The lists last while no particle has moved more than half the skin since their
+/// build ([`Neighbours::outdated`]): every pair now within the support is then in them.
+/// They also hold pairs beyond the support, which add nothing to a pair sum (every
+/// kernel and its gradient vanish there); a loop that is not weighted by the kernel
+/// must test the distance itself.
 #[derive(Default)]
 pub struct Neighbours {
     pub n_fluid: usize,
     pub n_ghost: usize,
-    /// Kernel support radius the lists were built for [m].
+    /// Kernel support radius [m].
     pub support: f64,
+    /// How far beyond the support the lists reach at their build [m]; 0: rebuilt every
+    /// step (`NeighbourGrid(skin)`).
+    pub skin: f64,
+    /// The joint positions (fluid, then ghosts) the lists were built from.
+    pub built_at: Vec<DVec2>,
+    /// This step's decision, when a stage before the grid (`GhostWalls`, which must
+    /// keep or renew its ghosts with the lists) has taken it.
+    pub plan: ListPlan,
+    /// Steps the lists have served and builds since the start of the run (or resume):
+    /// their mean age is `calls / builds`.
+    pub calls: u64,
+    pub builds: u64,
+    /// Steps the current lists have served before this one (0 on a build step).
+    pub age: u64,
     /// The lists, block by block (filled by the grid stage; read them with
     /// [`Neighbours::of`]).
     pub blocks: Vec<NeighbourBlock>,
@@ -174,7 +195,53 @@ pub struct Neighbours {
     pub grid: CellGrid,
 }
 
+/// Whether the lists are rebuilt this step, when decided before the grid stage runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ListPlan {
+    /// The grid stage decides ([`Neighbours::outdated`]).
+    #[default]
+    Undecided,
+    /// The lists stay (checked on this step's positions).
+    Keep,
+    /// The lists are rebuilt (the ghosts were renewed).
+    Rebuild,
+}
+
 impl Neighbours {
+    /// The radius the lists were built with, support and skin [m].
+    pub fn reach(&self) -> f64 {
+        self.support + self.skin
+    }
+
+    /// Whether the lists no longer hold every pair within the support of particles at
+    /// `fluid` and `ghost`: true without a skin, when the particle counts differ from
+    /// the build's, or when a particle has moved more than half the skin since it. A
+    /// function of the positions alone, so the same for any thread count.
+    pub fn outdated(&self, fluid: &[Position], ghost: &[Position]) -> bool {
+        if self.skin.is_nan()
+            || self.skin <= 0.0
+            || self.n_fluid != fluid.len()
+            || self.n_ghost != ghost.len()
+            || self.built_at.len() != fluid.len() + ghost.len()
+        {
+            return true;
+        }
+        let limit = (0.5 * self.skin).powi(2);
+        let (f0, g0) = self.built_at.split_at(fluid.len());
+        let moved = |now: &[Position], then: &[DVec2]| {
+            now.par_chunks(4096)
+                .zip(then.par_chunks(4096))
+                .any(|(a, b)| {
+                    a.iter().zip(b).any(|(a, b)| {
+                        // A non-finite position is outdated too.
+                        let d = a.0.distance_squared(*b);
+                        d.is_nan() || d > limit
+                    })
+                })
+        };
+        moved(fluid, f0) || moved(ghost, g0)
+    }
+
     /// Neighbours of fluid particle `i` (joint numbering, self excluded).
     #[inline(always)]
     pub fn of(&self, i: usize) -> &[u32] {
@@ -198,8 +265,8 @@ impl Neighbours {
         }
     }
 
-    /// Total number of neighbour pairs (i, j) in the lists: the interactions one
-    /// pass over all neighbours evaluates.
+    /// Total number of neighbour pairs (i, j) in the lists (within the support and
+    /// skin at the build): the interactions one pass over all neighbours evaluates.
     pub fn interactions(&self) -> usize {
         self.blocks.iter().map(|b| b.list.len()).sum()
     }
@@ -213,10 +280,18 @@ impl Neighbours {
             .sum();
         let g = &self.grid;
         blocks
+            + 16 * self.built_at.capacity()
             + 4 * (g.start.capacity() + g.particles.capacity() + g.cells.capacity())
             + 8 * (g.xs.capacity() + g.ys.capacity())
     }
 }
+
+/// Marks that a pair stage (`Forces`) writes every fluid particle's `NeighbourCount`
+/// (neighbours within the support) from its own neighbour loop each step, so the grid
+/// stage need not count the lists, which with a skin hold pairs beyond the support.
+/// Inserted at setup by that stage.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct NeighbourCountsInPass;
 
 /// Setup check shared by the stages that sum over neighbours.
 pub fn require_neighbours(sim: &Sim, stage: &'static str) -> Result<(), SetupError> {

@@ -152,6 +152,26 @@ pub(crate) mod sealed {
         /// [`Gather::index`] with the `len` and `stride` of the buffer at `base`, and
         /// `offset < stride`.
         unsafe fn gather(index: Self::Index, base: *const f64, offset: usize, pad: f64) -> Self;
+        /// The whole records of the group `js` in a buffer of `len` records of eight
+        /// f64s: element k of the result holds the f64 at offset k of each record,
+        /// `pad[k]` in unused lanes; the same values as eight [`Gather::gather`]s.
+        /// A lane type may load the records whole and transpose them instead (one
+        /// load per neighbour rather than one per field and neighbour).
+        ///
+        /// # Panics
+        /// If an index is `len` or more.
+        ///
+        /// # Safety
+        /// The lane type's instructions exist on this processor, and `base` holds
+        /// `8 len` f64s, 64-byte aligned.
+        #[inline(always)]
+        unsafe fn records8(js: &[u32], base: *const f64, len: usize, pad: &[f64; 8]) -> [Self; 8] {
+            // SAFETY: the caller's contract; `index` checks the indices.
+            unsafe {
+                let index = Self::index(js, 8, len);
+                std::array::from_fn(|k| Self::gather(index, base, k, pad[k]))
+            }
+        }
     }
 
     impl Gather for f64 {

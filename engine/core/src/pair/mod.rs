@@ -178,6 +178,41 @@ pub trait PairTerm: Sync + Clone {
     fn finish<L: Lane>(&self, me: &Me, acc: Self::Acc<L>) -> Self::Out;
 }
 
+/// A term summed together with the count of neighbours nearer than `radius`, in the
+/// same loop (the distance is computed for the term anyway): one compare and one add
+/// per group. Neighbour lists with a skin hold pairs beyond the kernel support; this
+/// counts those within it without a pass of its own.
+#[derive(Clone, Copy, Debug)]
+pub struct Counted<T> {
+    pub term: T,
+    /// [m]
+    pub radius: f64,
+}
+
+impl<T: PairTerm> PairTerm for Counted<T> {
+    type Acc<L: Lane> = (T::Acc<L>, L);
+    /// The term's result and the count.
+    type Out = (T::Out, u32);
+
+    fn reads(&self) -> Fields {
+        self.term.reads()
+    }
+    #[inline(always)]
+    fn zero<L: Lane>(&self) -> Self::Acc<L> {
+        (self.term.zero(), L::zero())
+    }
+    #[inline(always)]
+    fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, acc: &mut Self::Acc<L>) {
+        self.term.pair(me, p, &mut acc.0);
+        // The padding lanes lie four supports away: not counted.
+        acc.1 = acc.1 + L::splat(1.0).keep(p.r.lt(L::splat(self.radius)));
+    }
+    #[inline(always)]
+    fn finish<L: Lane>(&self, me: &Me, acc: Self::Acc<L>) -> Self::Out {
+        (self.term.finish(me, acc.0), acc.1.sum() as u32)
+    }
+}
+
 /// A term summed over neighbours with one kernel, on records packed for it, with an
 /// instruction set. Sound for any input: the records must hold what the term reads
 /// ([`Pass::new`] checks), and every neighbour index is checked against the records
@@ -312,18 +347,39 @@ impl<'a, T: PairTerm, K: Kernel> Pass<'a, T, K> {
         // composite's choice of terms) are plain values there, not loads through
         // references in every group.
         let term = self.term.clone();
+        // Groups of eight 64-byte records are read whole (`Gather::records8`), with
+        // the padding particle as a record.
+        let whole = L::WIDTH == 8 && stride == 8;
+        let mut pad_record = [0.0; 8];
+        if whole {
+            for f in 0..Field::COUNT {
+                if wanted[f] {
+                    pad_record[offsets[f]] = pad[f];
+                }
+            }
+        }
         let mut acc = term.zero::<L>();
         for js in neighbours.chunks(L::WIDTH) {
             let mut fields = [L::zero(); Field::COUNT];
-            // SAFETY: L's instructions exist (caller); `index` checks every index
-            // against `len`; the gathers read records of this buffer at offsets below
-            // its stride.
+            // SAFETY: L's instructions exist (caller); `index` and `records8` check
+            // every index against `len`; the gathers read records of this buffer at
+            // offsets below its stride, `records8` whole records of eight f64s of the
+            // 64-byte aligned buffer (`Records`' lines).
             unsafe {
-                let index = L::index(js, stride, len);
-                for f in Field::ALL {
-                    let f = f as usize;
-                    if wanted[f] {
-                        fields[f] = L::gather(index, base, offsets[f], pad[f]);
+                if whole {
+                    let rows = L::records8(js, base, len, &pad_record);
+                    for f in 0..Field::COUNT {
+                        if wanted[f] {
+                            fields[f] = rows[offsets[f]];
+                        }
+                    }
+                } else {
+                    let index = L::index(js, stride, len);
+                    for f in Field::ALL {
+                        let f = f as usize;
+                        if wanted[f] {
+                            fields[f] = L::gather(index, base, offsets[f], pad[f]);
+                        }
                     }
                 }
             }

@@ -53,6 +53,19 @@ pub struct RateSums {
     pub diffusion: f64,
 }
 
+impl std::ops::Add for RateSums {
+    type Output = Self;
+    /// The sums over two parts of a particle's neighbours.
+    fn add(self, b: Self) -> Self {
+        Self {
+            acc: self.acc + b.acc,
+            drho: self.drho + b.drho,
+            power: self.power + b.power,
+            diffusion: self.diffusion + b.diffusion,
+        }
+    }
+}
+
 /// The pair term that sums a set of rate terms in one neighbour loop.
 #[derive(Clone, Copy)]
 pub struct EquationsOfMotion<R: RateTerm>(pub R);
