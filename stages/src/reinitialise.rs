@@ -54,6 +54,11 @@ impl Stage for Reinitialise {
         "reinitialise"
     }
 
+    /// It filters the density column in place and keeps nothing between calls.
+    fn resumes_between_runs(&self) -> bool {
+        true
+    }
+
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         require_neighbours(sim, "reinitialise")
     }

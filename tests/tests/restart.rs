@@ -173,6 +173,23 @@ fn a_resumed_rolling_tank_is_bit_identical_and_a_damaged_checkpoint_falls_back()
     same_files_then_clean(full, part, &EVERY_OUTPUT);
 }
 
+/// The shipped studies switch the Shepard filter off as `every: 10^9`. The filter keeps
+/// nothing between its calls, so such a run still checkpoints and stops where asked
+/// (it used to hold every checkpoint back to step 10^9), and it resumes bit for bit.
+#[test]
+fn a_run_with_the_filter_switched_off_still_checkpoints_and_resumes() {
+    let off = || {
+        let mut set = WAVE_COARSE.to_vec();
+        set.push("pipeline.reinitialise.every=1000000000");
+        load(WAVE, "scenarios/wave_maker.ron", &set)
+    };
+    let full = uninterrupted(off(), "restart-nofilter-full");
+    let part = stopped(off(), "restart-nofilter-part", None, 0.25);
+    let notes = resume(off(), &part, 1);
+    assert!(notes.is_empty(), "{notes:?}");
+    same_files_then_clean(full, part, &EVERY_OUTPUT);
+}
+
 #[test]
 fn garbled_or_missing_checkpoints_are_reported() {
     let out = temp_out("restart-garbled");

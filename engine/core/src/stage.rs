@@ -35,6 +35,16 @@ pub trait Stage: Send {
         crate::contract::Access::default()
     }
 
+    /// Whether a run may checkpoint (and resume) between two calls of this stage when
+    /// the scenario runs it every N > 1 steps: true when all the stage leaves for later
+    /// steps is in the world's columns or its [`Stage::save_state`] (an in-place
+    /// filter). The default, false, puts checkpoints only on steps where the stage runs
+    /// next, so that what it builds for the steps after it (lists, caches) is rebuilt
+    /// on the first step after a resume.
+    fn resumes_between_runs(&self) -> bool {
+        false
+    }
+
     /// The stage's private state for a checkpoint (counters, next sample time,
     /// per-particle columns it owns), encoded with [`crate::checkpoint::Enc`]. Stages
     /// that write files flush them here, so the files hold every row up to the

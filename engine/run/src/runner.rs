@@ -295,9 +295,12 @@ fn run_in_pool(
     }
     let start_step = sim.clock.step;
     // Checkpoints fall on steps where every stage runs next, so the stages' outputs
-    // (neighbour lists, ...) are all rebuilt on the first step after a resume.
+    // (neighbour lists, ...) are all rebuilt on the first step after a resume; a stage
+    // that leaves nothing outside the checkpoint (an in-place filter, even one run
+    // every 10^9 steps to switch it off) does not hold them back.
     let period = pipeline
         .iter()
+        .filter(|e| !e.stage.resumes_between_runs())
         .fold(1u64, |l, e| lcm(l, e.every.max(1) as u64));
     let mut next_checkpoint = opts
         .checkpoint_every
