@@ -14,7 +14,7 @@ use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{get_column, put_column, Dec, Enc};
 use sph_core::components::{Acceleration, Density, DensityRate, Fluid, Mass, Position, Velocity};
 use sph_core::contract::Access;
-use sph_core::sim::{Clock, Sim};
+use sph_core::sim::{Clock, Sim, Tait};
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{BodyPose, GuardPower, Guarded, HalfDensity, HalfVelocity, WallPose, Walls};
 use sph_core::world::{archetype, column, column_mut, ensure_component};
@@ -223,7 +223,6 @@ impl Stage for Integrate {
         // end of the step, which is where the particles are checked against them.
         sim.clock.advance(dt, &sim.world);
         self.walls.read(&sim.world);
-        let reflect = self.params.reflect_at_walls;
         let floor = if self.params.restore_density_on_reflection {
             c.eos.rho0
         } else {
@@ -235,69 +234,69 @@ impl Stage for Integrate {
         let least = self.params.density_floor.map(|f| f * rho0);
         let (eos, g) = (c.eos, c.gravity);
         let _span = tracing::info_span!("advance").entered();
-        // One pass: kick, drift, reflect at the walls (at their end-of-step place),
-        // raise densities to the floor, then check; it returns the reflections, the
-        // floored particles, the guards' energy change and the lowest offending index.
-        let (reflected, floored, guard_energy, bad) = (
-            &mut x[..],
-            &mut v[..],
-            &mut rho[..],
-            &mut vh[..],
-            &mut rh[..],
-            &mut guarded[..],
-            acc,
-            rate,
-            &mass[..],
+        let step = Kick {
+            first_step,
+            kick,
+            dt,
+            reflect: self.params.reflect_at_walls,
+            floor,
+            reach,
+            least,
+            eos,
+            g,
+            lo,
+            hi,
+            // |rho/rho_0 - 1| <= limit, as a band (no division per particle).
+            rho_band: (rho0 * (1.0 - limit), rho0 * (1.0 + limit)),
+            walls: &self.walls,
+        };
+        // One pass in chunks of particles (a plain loop inside each, no call per
+        // particle): kick, drift, reflect at the walls (at their end-of-step place),
+        // raise densities to the floor, then check. The sums are of integers and the
+        // bad index a minimum, so the outcome is the same for any thread count.
+        let tally = (
+            x.par_chunks_mut(ADVANCE_CHUNK),
+            v.par_chunks_mut(ADVANCE_CHUNK),
+            rho.par_chunks_mut(ADVANCE_CHUNK),
+            vh.par_chunks_mut(ADVANCE_CHUNK),
+            rh.par_chunks_mut(ADVANCE_CHUNK),
+            guarded.par_chunks_mut(ADVANCE_CHUNK),
+            acc.par_chunks(ADVANCE_CHUNK),
+            rate.par_chunks(ADVANCE_CHUNK),
+            mass.par_chunks(ADVANCE_CHUNK),
         )
             .into_par_iter()
             .enumerate()
-            .map(|(i, (x, v, rho, vh, rh, guarded, a, r, m))| {
-                let (vhalf, rhalf) = if first_step {
-                    (v.0, rho.0)
-                } else {
-                    (vh.0, rh.0)
-                };
-                vh.0 = vhalf + kick * a.0;
-                rh.0 = rhalf + kick * r.0;
-                x.0 += dt * vh.0;
-                v.0 = vh.0 + 0.5 * dt * a.0;
-                rho.0 = rh.0 + 0.5 * dt * r.0;
-                let before = (x.0, v.0, rho.0, vh.0, rh.0);
-                let hit = reflect && self.reflect(floor, reach, x, v, vh, rho, rh);
-                let raised = least.is_some_and(|least| raise_to_floor(least, rho, rh));
-                // The energy a guard added: kinetic + potential + internal after it
-                // acted minus before (a reflection off a moving wall changes the
-                // kinetic energy; the floor and a restored density the internal one).
-                // The half-step velocity and density are the state carried on (the
-                // integer-time ones are predictions from them), so their changes are
-                // what the guard adds for good.
-                let de = if hit || raised {
-                    let e = |x: DVec2, v: DVec2, rho: f64| {
-                        m.0 * (0.5 * v.length_squared() - g.dot(x) + eos.internal_energy(rho))
-                    };
-                    let (v1, rho1) = (before.1 + (vh.0 - before.3), before.2 + (rh.0 - before.4));
-                    fixed_point(e(x.0, v1, rho1) - e(before.0, before.1, before.2))
-                } else {
-                    0
-                };
-                guarded.0 |=
-                    ((hit as u8) * Guarded::REFLECTED) | ((raised as u8) * Guarded::FLOORED);
-                let p = x.0;
-                let ok = p.is_finite()
-                    && rho.0.is_finite()
-                    && p.cmpge(lo).all()
-                    && p.cmple(hi).all()
-                    && (rho.0 / rho0 - 1.0).abs() <= limit
-                    && self.walls.crossed(p, reach).is_none();
-                (hit as usize, raised as usize, de, (!ok).then_some(i))
+            .map(|(c, (x, v, rho, vh, rh, guarded, a, r, m))| {
+                let mut t = Tally::default();
+                for k in 0..x.len() {
+                    let (hit, raised, de, ok) = step.particle(
+                        &mut x[k],
+                        &mut v[k],
+                        &mut rho[k],
+                        &mut vh[k],
+                        &mut rh[k],
+                        &mut guarded[k],
+                        a[k],
+                        r[k],
+                        m[k],
+                    );
+                    t.reflected += hit as usize;
+                    t.floored += raised as usize;
+                    t.energy = t.energy.saturating_add(de);
+                    if !ok && t.bad.is_none() {
+                        t.bad = Some(c * ADVANCE_CHUNK + k);
+                    }
+                }
+                t
             })
-            .reduce(
-                || (0, 0, 0, None),
-                |(h1, f1, e1, b1), (h2, f2, e2, b2)| {
-                    let bad = b1.into_iter().chain(b2).min();
-                    (h1 + h2, f1 + f2, e1.saturating_add(e2), bad)
-                },
-            );
+            .reduce(Tally::default, Tally::merge);
+        let Tally {
+            reflected,
+            floored,
+            energy: guard_energy,
+            bad,
+        } = tally;
         if let Some(p) = sim.resources.get_mut::<GuardPower>() {
             p.power = guard_energy as f64 / FIXED_POINT / dt;
         }
@@ -360,14 +359,24 @@ impl Extremes {
             finite: true,
         };
         // max and && are order-independent: the same result for any thread count.
-        (v, a, r, rho)
+        // Chunks with a plain loop inside (no call per particle).
+        const CHUNK: usize = 4096;
+        (
+            v.par_chunks(CHUNK),
+            a.par_chunks(CHUNK),
+            r.par_chunks(CHUNK),
+            rho.par_chunks(CHUNK),
+        )
             .into_par_iter()
-            .with_min_len(4096)
-            .fold(none, |e, (v, a, r, rho)| Self {
-                max_v2: e.max_v2.max(v.0.length_squared()),
-                max_a2: e.max_a2.max(a.0.length_squared()),
-                max_rho: e.max_rho.max(rho.0),
-                finite: e.finite & a.0.is_finite() & r.0.is_finite(),
+            .map(|(v, a, r, rho)| {
+                let mut e = none();
+                for k in 0..v.len().min(a.len()).min(r.len()).min(rho.len()) {
+                    e.max_v2 = e.max_v2.max(v[k].0.length_squared());
+                    e.max_a2 = e.max_a2.max(a[k].0.length_squared());
+                    e.max_rho = e.max_rho.max(rho[k].0);
+                    e.finite &= a[k].0.is_finite() & r[k].0.is_finite();
+                }
+                e
             })
             .reduce(none, |p, q| Self {
                 max_v2: p.max_v2.max(q.max_v2),
@@ -375,6 +384,119 @@ impl Extremes {
                 max_rho: p.max_rho.max(q.max_rho),
                 finite: p.finite & q.finite,
             })
+    }
+}
+
+/// Particles per chunk of the advance pass.
+const ADVANCE_CHUNK: usize = 2048;
+
+/// What the advance pass counts: reflections, floored particles, the guards' energy
+/// (fixed point) and the lowest index that failed the end-of-step check.
+#[derive(Default)]
+struct Tally {
+    reflected: usize,
+    floored: usize,
+    energy: i128,
+    bad: Option<usize>,
+}
+
+impl Tally {
+    fn merge(self, o: Self) -> Self {
+        Self {
+            reflected: self.reflected + o.reflected,
+            floored: self.floored + o.floored,
+            energy: self.energy.saturating_add(o.energy),
+            bad: self.bad.into_iter().chain(o.bad).min(),
+        }
+    }
+}
+
+/// One step's constants for the per-particle update.
+struct Kick<'a> {
+    first_step: bool,
+    kick: f64,
+    dt: f64,
+    reflect: bool,
+    floor: f64,
+    reach: f64,
+    least: Option<f64>,
+    eos: Tait,
+    g: DVec2,
+    lo: DVec2,
+    hi: DVec2,
+    rho_band: (f64, f64),
+    walls: &'a Walls,
+}
+
+impl Kick<'_> {
+    /// Kick, drift, guards and check of one particle (the leapfrog of the module
+    /// docs); returns (reflected, floored, the guards' energy in fixed point, passed
+    /// the check).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn particle(
+        &self,
+        x: &mut Position,
+        v: &mut Velocity,
+        rho: &mut Density,
+        vh: &mut HalfVelocity,
+        rh: &mut HalfDensity,
+        guarded: &mut Guarded,
+        a: Acceleration,
+        r: DensityRate,
+        m: Mass,
+    ) -> (bool, bool, i128, bool) {
+        let (vhalf, rhalf) = if self.first_step {
+            (v.0, rho.0)
+        } else {
+            (vh.0, rh.0)
+        };
+        let dt = self.dt;
+        vh.0 = vhalf + self.kick * a.0;
+        rh.0 = rhalf + self.kick * r.0;
+        x.0 += dt * vh.0;
+        v.0 = vh.0 + 0.5 * dt * a.0;
+        rho.0 = rh.0 + 0.5 * dt * r.0;
+        // A particle in front of every wall line has crossed none and needs no
+        // reflection (both tests need it behind a line); most take this way.
+        let clear = self.walls.in_front_of_all(x.0);
+        let before = (x.0, v.0, rho.0, vh.0, rh.0);
+        let hit = self.reflect && !clear && {
+            let hit = self
+                .walls
+                .reflect(self.reach, &mut x.0, [&mut v.0, &mut vh.0]);
+            if hit {
+                rho.0 = rho.0.max(self.floor);
+                rh.0 = rh.0.max(self.floor);
+            }
+            hit
+        };
+        let raised = self
+            .least
+            .is_some_and(|least| raise_to_floor(least, rho, rh));
+        // The energy a guard added: kinetic + potential + internal after it acted
+        // minus before (a reflection off a moving wall changes the kinetic energy;
+        // the floor and a restored density the internal one). The half-step velocity
+        // and density are the state carried on (the integer-time ones are
+        // predictions from them), so their changes are what the guard adds for good.
+        let de = if hit || raised {
+            let e = |x: DVec2, v: DVec2, rho: f64| {
+                m.0 * (0.5 * v.length_squared() - self.g.dot(x) + self.eos.internal_energy(rho))
+            };
+            let (v1, rho1) = (before.1 + (vh.0 - before.3), before.2 + (rh.0 - before.4));
+            fixed_point(e(x.0, v1, rho1) - e(before.0, before.1, before.2))
+        } else {
+            0
+        };
+        guarded.0 |= ((hit as u8) * Guarded::REFLECTED) | ((raised as u8) * Guarded::FLOORED);
+        let p = x.0;
+        let ok = p.is_finite()
+            && rho.0 >= self.rho_band.0
+            && rho.0 <= self.rho_band.1
+            && p.cmpge(self.lo).all()
+            && p.cmple(self.hi).all()
+            && (clear || self.walls.crossed(p, self.reach).is_none());
+        (hit, raised, de, ok)
     }
 }
 
@@ -396,31 +518,6 @@ impl Integrate {
             format!("density {r:.1} kg/m^3 is beyond rho_0 (1 +- {limit})")
         };
         unstable(&what, i, p)
-    }
-
-    /// Reflects a particle that ended the step behind a wall (position mirrored, normal
-    /// velocity relative to the wall reversed), or diagonally past a convex corner
-    /// within `reach` of it (mirrored across both walls); returns whether it did. With
-    /// `restore_density_on_reflection`, `floor` (rho_0) is the reflected particle's
-    /// least density; otherwise `floor` is 0 and densities are kept.
-    #[allow(clippy::too_many_arguments)]
-    #[inline]
-    fn reflect(
-        &self,
-        floor: f64,
-        reach: f64,
-        x: &mut Position,
-        v: &mut Velocity,
-        vh: &mut HalfVelocity,
-        rho: &mut Density,
-        rh: &mut HalfDensity,
-    ) -> bool {
-        let hit = self.walls.reflect(reach, &mut x.0, [&mut v.0, &mut vh.0]);
-        if hit {
-            rho.0 = rho.0.max(floor);
-            rh.0 = rh.0.max(floor);
-        }
-        hit
     }
 }
 

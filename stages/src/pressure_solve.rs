@@ -52,7 +52,10 @@ use glam::DVec2;
 use rayon::prelude::*;
 use sph_core::components::{Density, Fluid, Ghost, Pressure, Velocity};
 use sph_core::kernel::Kernel;
-use sph_core::pair::{with_records, EquationsOfMotion, Fields, PairTerm, Pass, RateSums};
+use sph_core::pair::{
+    with_records, with_records_refreshed, EquationsOfMotion, Field, Fields, PairTerm, Pass,
+    RateSums,
+};
 use sph_core::sim::Sim;
 use sph_core::stage::StepError;
 use sph_core::vocab::{DfsphFactors, GhostReflections, Neighbours};
@@ -185,6 +188,10 @@ impl Jacobi {
                 .for_each(|p| p.0 *= warm);
         }
         sync_ghost_pressures(sim, offsets)?;
+        // Every pass of the solve reads these records; positions, densities and
+        // masses stay as they are through the solve, so each pass packs again only
+        // the velocities or the pressures that the iterations change.
+        with_records(sim, SOLVE_FIELDS, |_, _, _| Ok(()))?;
         if warm > 0.0 {
             self.pressure_acceleration(sim)?;
             self.set_velocities(sim, dt)?;
@@ -233,16 +240,16 @@ impl Jacobi {
     /// D rho/Dt of every fluid particle from the velocities in the columns.
     fn divergence(&mut self, sim: &mut Sim) -> Result<(), StepError> {
         let term = EquationsOfMotion(Continuity);
-        let fields = <Continuity as Term>::READS;
-        each(sim, &term, fields, &mut self.rate, |s: RateSums| s.drho)
+        let velocities = Packing::Refresh(Fields::of(&[Field::Vx, Field::Vy]));
+        each_packed(sim, &term, velocities, &mut self.rate, |s: RateSums| s.drho)
     }
 
     /// The pressure acceleration of every fluid particle from the pressures in the
     /// columns.
     fn pressure_acceleration(&mut self, sim: &mut Sim) -> Result<(), StepError> {
         let term = EquationsOfMotion(PressureGradient);
-        let fields = <PressureGradient as Term>::READS;
-        each(sim, &term, fields, &mut self.acc, |s: RateSums| s.acc)
+        let pressures = Packing::Refresh(Fields::of(&[Field::PRho2]));
+        each_packed(sim, &term, pressures, &mut self.acc, |s: RateSums| s.acc)
     }
 
     /// v = v0 + dt a_p for the fluid, and the mirror of the change for the ghosts.
@@ -274,6 +281,18 @@ impl Jacobi {
         Ok(())
     }
 }
+
+/// The records the solve's passes read: continuity's (velocities) and the pressure
+/// gradient's (p / rho^2), with the geometry, densities and masses; packed as the
+/// momentum pass's 64-byte record, the sound speed filling the eighth place, because
+/// the pair loop has a build for that layout (whole-record loads, offsets known when
+/// compiled).
+const SOLVE_FIELDS: Fields = Fields::of(&Field::MOMENTUM);
+const _: () = assert!(
+    SOLVE_FIELDS.bits() & <Continuity as Term>::READS.bits() == <Continuity as Term>::READS.bits()
+        && SOLVE_FIELDS.bits() & <PressureGradient as Term>::READS.bits()
+            == <PressureGradient as Term>::READS.bits()
+);
 
 /// Particle i's density error r_i (see the module docs) for density `rho` and
 /// D rho/Dt `rate`.
@@ -314,7 +333,28 @@ pub(crate) fn each<T: PairTerm, O: Send>(
     out: &mut [O],
     pick: impl Fn(T::Out) -> O + Sync,
 ) -> Result<(), StepError> {
-    with_records(sim, fields, |sim, _, records| {
+    each_packed(sim, term, Packing::Full(fields), out, pick)
+}
+
+/// How a pass gets its records.
+#[derive(Clone, Copy)]
+enum Packing {
+    /// Packed in full with these fields.
+    Full(Fields),
+    /// Already packed with every field the pass reads (by the solve, before its
+    /// first pass); these have changed since and are packed again.
+    Refresh(Fields),
+}
+
+/// [`each`] with the records as `packing` says.
+fn each_packed<T: PairTerm, O: Send>(
+    sim: &mut Sim,
+    term: &T,
+    packing: Packing,
+    out: &mut [O],
+    pick: impl Fn(T::Out) -> O + Sync,
+) -> Result<(), StepError> {
+    let body = |sim: &Sim, _: &sph_core::world::Particles, records: &sph_core::pair::Records| {
         let Some(nb) = sim.resources.get::<Neighbours>() else {
             return Err(StepError::Internal("no neighbour lists".into()));
         };
@@ -327,7 +367,11 @@ pub(crate) fn each<T: PairTerm, O: Send>(
         }
         let c = &sim.constants;
         with_kernel!(c.kernel, c.h, |k| run(term, k, records, nb, out, &pick))
-    })?;
+    };
+    match packing {
+        Packing::Full(fields) => with_records(sim, fields, body)?,
+        Packing::Refresh(changed) => with_records_refreshed(sim, changed, body)?,
+    };
     Ok(())
 }
 

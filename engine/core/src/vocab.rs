@@ -232,10 +232,11 @@ impl Neighbours {
             now.par_chunks(4096)
                 .zip(then.par_chunks(4096))
                 .any(|(a, b)| {
-                    a.iter().zip(b).any(|(a, b)| {
-                        // A non-finite position is outdated too.
+                    // Without an early exit, so that the chunk's loop vectorises;
+                    // a non-finite position is outdated too.
+                    a.iter().zip(b).fold(false, |out, (a, b)| {
                         let d = a.0.distance_squared(*b);
-                        d.is_nan() || d > limit
+                        out | d.is_nan() | (d > limit)
                     })
                 })
         };

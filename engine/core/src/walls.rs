@@ -158,6 +158,13 @@ impl Walls {
         }
     }
 
+    /// Whether `x` is on the fluid side of every wall's line (a NaN is not): such a
+    /// point has crossed no wall and no corner, since both need it behind a line.
+    #[inline]
+    pub fn in_front_of_all(&self, x: DVec2) -> bool {
+        self.lines.iter().all(|l| l.distance(x) >= 0.0)
+    }
+
     /// Where `x` has crossed the walls as they are now: behind a wall while alongside
     /// it (end points included), else past a convex corner (behind both lines, within
     /// `reach` of the meeting point); `None` if it has not.

@@ -413,16 +413,48 @@ pub fn with_records<R>(
     fields: Fields,
     f: impl FnOnce(&crate::Sim, &crate::world::Particles, &Records) -> Result<R, crate::StepError>,
 ) -> Result<Option<R>, crate::StepError> {
+    with_records_filled(sim, Fill::Pack(fields), f)
+}
+
+/// [`with_records`] for a pass that follows another on records already packed with
+/// every field it reads: only `changed` is packed again (see [`Records::refresh`]).
+/// Meant for the iterations of a solve, which change velocities or pressures between
+/// passes and nothing else; the caller packs the records in full before the first.
+///
+/// # Errors
+/// As [`Records::refresh`], or what `f` returns.
+pub fn with_records_refreshed<R>(
+    sim: &mut crate::Sim,
+    changed: Fields,
+    f: impl FnOnce(&crate::Sim, &crate::world::Particles, &Records) -> Result<R, crate::StepError>,
+) -> Result<Option<R>, crate::StepError> {
+    with_records_filled(sim, Fill::Refresh(changed), f)
+}
+
+/// How [`with_records_filled`] fills the records.
+enum Fill {
+    Pack(Fields),
+    Refresh(Fields),
+}
+
+fn with_records_filled<R>(
+    sim: &mut crate::Sim,
+    fill: Fill,
+    f: impl FnOnce(&crate::Sim, &crate::world::Particles, &Records) -> Result<R, crate::StepError>,
+) -> Result<Option<R>, crate::StepError> {
     let mut records = sim.resources.take::<Records>().unwrap_or_default();
     let gradients = sim
         .resources
         .get::<crate::vocab::DensityGradients>()
         .map(|g| &g.0[..]);
+    let eos = &sim.constants.eos;
     let result = match crate::world::Particles::of(&sim.world) {
-        Some(particles) => records
-            .pack_with(&particles, fields, &sim.constants.eos, gradients)
-            .and_then(|()| f(sim, &particles, &records))
-            .map(Some),
+        Some(particles) => match fill {
+            Fill::Pack(fields) => records.pack_with(&particles, fields, eos, gradients),
+            Fill::Refresh(changed) => records.refresh(&particles, changed, eos),
+        }
+        .and_then(|()| f(sim, &particles, &records))
+        .map(Some),
         None => Ok(None),
     };
     sim.resources.insert(records);

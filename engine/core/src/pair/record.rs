@@ -261,6 +261,37 @@ impl Records {
         eos: &Tait,
         gradients: Option<&[glam::DVec2]>,
     ) -> Result<(), StepError> {
+        self.write(particles, fields, eos, gradients, true)
+    }
+
+    /// Packs `changed` again into records that hold it, leaving the other fields as
+    /// they are: for a pass that follows another on the same particles when only
+    /// these fields have changed since (a pressure solve's iterations change the
+    /// velocities or the pressures, not the positions). A stale field is the caller's
+    /// to rule out; see [`super::with_records_refreshed`].
+    ///
+    /// # Errors
+    /// The records lack a field of `changed`, or were packed for another number of
+    /// particles; a column `changed` needs is missing.
+    pub fn refresh(
+        &mut self,
+        particles: &Particles,
+        changed: Fields,
+        eos: &Tait,
+    ) -> Result<(), StepError> {
+        self.write(particles, changed, eos, None, false)
+    }
+
+    /// Writes `fields` of every particle: into a fresh layout for them (`reshape`), or
+    /// into the present layout, which must hold them.
+    fn write(
+        &mut self,
+        particles: &Particles,
+        fields: Fields,
+        eos: &Tait,
+        gradients: Option<&[glam::DVec2]>,
+        reshape: bool,
+    ) -> Result<(), StepError> {
         let (x, rho, m) = (
             particles.joined::<Position>()?,
             particles.joined::<Density>()?,
@@ -300,38 +331,55 @@ impl Records {
                 "{len} particles are too many for the packed records' 32-bit offsets"
             )));
         }
-        self.shape(fields, len);
-        let (stride, offsets, held) = (self.stride, self.offsets, self.fields);
+        if reshape {
+            self.shape(fields, len);
+        } else if len != self.len {
+            return Err(StepError::Internal(format!(
+                "records packed for {} particles refreshed for {len}",
+                self.len
+            )));
+        } else if let Some(f) = self.lacks(fields) {
+            return Err(StepError::Internal(format!(
+                "the records lack {f:?}, so it cannot be refreshed: pack it first"
+            )));
+        }
+        // The fields written: all the layout holds, or just those refreshed.
+        let held = if reshape { self.fields } else { fields };
+        let (stride, offsets) = (self.stride, self.offsets);
         let values: &mut [f64] = bytemuck_lines(&mut self.lines);
+        // Blocks of records with a plain loop inside (no call per record).
+        const PACK_CHUNK: usize = 512;
         values[..len * stride]
-            .par_chunks_mut(stride)
+            .par_chunks_mut(stride * PACK_CHUNK)
             .enumerate()
-            .for_each(|(j, out)| {
-                let j = j as u32;
-                let mut put = |f: Field, value: f64| {
-                    if held.contains(f) {
-                        out[offsets[f as usize]] = value;
+            .for_each(|(c, block)| {
+                for (k, out) in block.chunks_exact_mut(stride).enumerate() {
+                    let j = (c * PACK_CHUNK + k) as u32;
+                    let mut put = |f: Field, value: f64| {
+                        if held.contains(f) {
+                            out[offsets[f as usize]] = value;
+                        }
+                    };
+                    let (xj, rhoj) = (x.get(j).0, rho.get(j).0);
+                    put(Field::X, xj.x);
+                    put(Field::Y, xj.y);
+                    put(Field::Rho, rhoj);
+                    put(Field::Mass, m.get(j).0);
+                    if let Some(v) = &v {
+                        let vj = v.get(j).0;
+                        put(Field::Vx, vj.x);
+                        put(Field::Vy, vj.y);
                     }
-                };
-                let (xj, rhoj) = (x.get(j).0, rho.get(j).0);
-                put(Field::X, xj.x);
-                put(Field::Y, xj.y);
-                put(Field::Rho, rhoj);
-                put(Field::Mass, m.get(j).0);
-                if let Some(v) = &v {
-                    let vj = v.get(j).0;
-                    put(Field::Vx, vj.x);
-                    put(Field::Vy, vj.y);
-                }
-                if let Some(p) = &p {
-                    put(Field::PRho2, p.get(j).0 / (rhoj * rhoj));
-                }
-                if held.contains(Field::Sound) {
-                    put(Field::Sound, eos.sound_speed(rhoj));
-                }
-                if let Some(g) = grad {
-                    put(Field::GradRhoX, g[j as usize].x);
-                    put(Field::GradRhoY, g[j as usize].y);
+                    if let Some(p) = &p {
+                        put(Field::PRho2, p.get(j).0 / (rhoj * rhoj));
+                    }
+                    if held.contains(Field::Sound) {
+                        put(Field::Sound, eos.sound_speed(rhoj));
+                    }
+                    if let Some(g) = grad {
+                        put(Field::GradRhoX, g[j as usize].x);
+                        put(Field::GradRhoY, g[j as usize].y);
+                    }
                 }
             });
         Ok(())
