@@ -21,9 +21,11 @@
 //! omega alpha_i max(r_i, 0) / dt^2 only, so an overshoot stayed for the rest of the
 //! solve: on still water a column-wise shear mode grew to 0.03-0.08 m/s within a
 //! second; with the projection the water stays below 0.0003 m/s until 2.4 s, when the
-//! mode starts to grow from this smaller seed (docs/validation.md, "DFSPH"). The solve starts from a fraction of the previous step's pressures (the
-//! warm start, applied everywhere: the projected update lowers what the step does not
-//! need), by default half (SPlisHSPlasH's DFSPH starts from the previous step's
+//! mode starts to grow from this smaller seed (docs/validation.md, "DFSPH").
+//!
+//! The solve starts from a fraction of the previous step's pressures (the warm start,
+//! applied everywhere: the projected update lowers what the step does not need), by
+//! default half (SPlisHSPlasH's DFSPH starts from the previous step's
 //! pressure increment, which in a steady state is half the pressure). A full warm
 //! start makes still water bounce (the bottom pressure swings between 2 % and 180 % of
 //! rho_0 g H within a second): a pressure error that the tolerance lets through is
@@ -53,7 +55,7 @@ use rayon::prelude::*;
 use sph_core::components::{Density, Fluid, Ghost, Pressure, Velocity};
 use sph_core::kernel::Kernel;
 use sph_core::pair::{
-    with_records, with_records_refreshed, EquationsOfMotion, Field, Fields, PairTerm, Pass,
+    with_records, with_records_packed, EquationsOfMotion, Field, Fields, Packing, PairTerm, Pass,
     RateSums,
 };
 use sph_core::sim::Sim;
@@ -336,16 +338,6 @@ pub(crate) fn each<T: PairTerm, O: Send>(
     each_packed(sim, term, Packing::Full(fields), out, pick)
 }
 
-/// How a pass gets its records.
-#[derive(Clone, Copy)]
-enum Packing {
-    /// Packed in full with these fields.
-    Full(Fields),
-    /// Already packed with every field the pass reads (by the solve, before its
-    /// first pass); these have changed since and are packed again.
-    Refresh(Fields),
-}
-
 /// [`each`] with the records as `packing` says.
 fn each_packed<T: PairTerm, O: Send>(
     sim: &mut Sim,
@@ -368,10 +360,7 @@ fn each_packed<T: PairTerm, O: Send>(
         let c = &sim.constants;
         with_kernel!(c.kernel, c.h, |k| run(term, k, records, nb, out, &pick))
     };
-    match packing {
-        Packing::Full(fields) => with_records(sim, fields, body)?,
-        Packing::Refresh(changed) => with_records_refreshed(sim, changed, body)?,
-    };
+    with_records_packed(sim, packing, body)?;
     Ok(())
 }
 

@@ -413,33 +413,29 @@ pub fn with_records<R>(
     fields: Fields,
     f: impl FnOnce(&crate::Sim, &crate::world::Particles, &Records) -> Result<R, crate::StepError>,
 ) -> Result<Option<R>, crate::StepError> {
-    with_records_filled(sim, Fill::Pack(fields), f)
+    with_records_packed(sim, Packing::Full(fields), f)
 }
 
-/// [`with_records`] for a pass that follows another on records already packed with
-/// every field it reads: only `changed` is packed again (see [`Records::refresh`]).
-/// Meant for the iterations of a solve, which change velocities or pressures between
-/// passes and nothing else; the caller packs the records in full before the first.
-///
-/// # Errors
-/// As [`Records::refresh`], or what `f` returns.
-pub fn with_records_refreshed<R>(
-    sim: &mut crate::Sim,
-    changed: Fields,
-    f: impl FnOnce(&crate::Sim, &crate::world::Particles, &Records) -> Result<R, crate::StepError>,
-) -> Result<Option<R>, crate::StepError> {
-    with_records_filled(sim, Fill::Refresh(changed), f)
-}
-
-/// How [`with_records_filled`] fills the records.
-enum Fill {
-    Pack(Fields),
+/// How [`with_records_packed`] fills the shared records.
+#[derive(Clone, Copy, Debug)]
+pub enum Packing {
+    /// Packed in full with these fields ([`Records::pack`]).
+    Full(Fields),
+    /// For a pass that follows another on records already packed with every field it
+    /// reads: only these fields, changed since, are packed again
+    /// ([`Records::refresh`]). Meant for the iterations of a solve, which change
+    /// velocities or pressures between passes and nothing else; the caller packs the
+    /// records in full before the first.
     Refresh(Fields),
 }
 
-fn with_records_filled<R>(
+/// [`with_records`] with the records filled as `packing` says.
+///
+/// # Errors
+/// As [`Records::pack`] or [`Records::refresh`], or what `f` returns.
+pub fn with_records_packed<R>(
     sim: &mut crate::Sim,
-    fill: Fill,
+    packing: Packing,
     f: impl FnOnce(&crate::Sim, &crate::world::Particles, &Records) -> Result<R, crate::StepError>,
 ) -> Result<Option<R>, crate::StepError> {
     let mut records = sim.resources.take::<Records>().unwrap_or_default();
@@ -449,9 +445,9 @@ fn with_records_filled<R>(
         .map(|g| &g.0[..]);
     let eos = &sim.constants.eos;
     let result = match crate::world::Particles::of(&sim.world) {
-        Some(particles) => match fill {
-            Fill::Pack(fields) => records.pack_with(&particles, fields, eos, gradients),
-            Fill::Refresh(changed) => records.refresh(&particles, changed, eos),
+        Some(particles) => match packing {
+            Packing::Full(fields) => records.pack_with(&particles, fields, eos, gradients),
+            Packing::Refresh(changed) => records.refresh(&particles, changed, eos),
         }
         .and_then(|()| f(sim, &particles, &records))
         .map(Some),

@@ -268,7 +268,7 @@ impl Records {
     /// they are: for a pass that follows another on the same particles when only
     /// these fields have changed since (a pressure solve's iterations change the
     /// velocities or the pressures, not the positions). A stale field is the caller's
-    /// to rule out; see [`super::with_records_refreshed`].
+    /// to rule out; see [`super::Packing::Refresh`].
     ///
     /// # Errors
     /// The records lack a field of `changed`, or were packed for another number of
