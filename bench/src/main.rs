@@ -72,6 +72,11 @@ struct PeerArgs {
         default_value = "pipeline.density_solve.tolerance=0.005"
     )]
     dfsph_set: Vec<String>,
+    /// salva2d's density tolerance: the mean compression max(rho*/rho_0 - 1, 0) at which
+    /// its density solve stops (`DFSPHSolver::max_density_error`). Default: salva2d's own
+    /// default, 5 %; 0.005 gives it the DFSPH row's 0.5 %.
+    #[arg(long, default_value_t = 0.05)]
+    salva_tolerance: f64,
     /// Folder for peer.md.
     #[arg(long, default_value = "out/bench")]
     out: PathBuf,
@@ -117,10 +122,35 @@ struct PeerResult {
     front: Vec<(f64, f64)>,
 }
 
+/// How salva2d's step is chosen. salva2d 0.11 takes one substep per `LiquidWorld::step`
+/// call: its CFL substepping is disabled (`TimestepManager::compute_substep` returns the
+/// whole frame, marked FIXME), so the caller's frame is its time step.
+#[derive(Clone, Copy, PartialEq)]
+enum SalvaStep {
+    /// Fixed frames of 10 x 0.4 ds / (7 m/s): the bench's set-up before it was known that
+    /// salva2d does not substep; particles then move up to about 2.8 ds per step.
+    Fixed,
+    /// dt = CFL x ds / max|v|, at most `MAX_DT`: the rule of our DFSPH pipeline
+    /// (stages/src/density_solve.rs) and the one salva2d's own disabled
+    /// `TimestepManager::max_substep` computes (0.4 x particle diameter / max speed).
+    Cfl,
+}
+
+/// The CFL number and step cap shared by both DFSPH codes when stepped by [`SalvaStep::Cfl`]
+/// (the defaults of our `DensitySolve`: courant 0.4, max_dt 5 ms).
+const CFL: f64 = 0.4;
+const MAX_DT: f64 = 5e-3;
+
 /// salva2d on the same column: DFSPH, particles of radius ds/2 on the same lattice,
 /// three layers of boundary particles (Akinci) along floor and side walls, artificial
 /// viscosity. Front = largest x of fluid with y < ds, plus ds/2 (our probe's rule).
-fn run_salva(across: usize, threads: usize, end_time: f64) -> Result<PeerResult, String> {
+fn run_salva(
+    across: usize,
+    threads: usize,
+    end_time: f64,
+    rule: SalvaStep,
+    tolerance: f64,
+) -> Result<PeerResult, String> {
     let ds = A / across as f64;
     let r = (ds / 2.0) as f32;
     let pool = rayon::ThreadPoolBuilder::new()
@@ -128,12 +158,9 @@ fn run_salva(across: usize, threads: usize, end_time: f64) -> Result<PeerResult,
         .build()
         .map_err(|e| e.to_string())?;
     pool.install(|| {
-        let mut world = LiquidWorld::new(
-            DFSPHSolver::<CubicSplineKernel, CubicSplineKernel>::new(),
-            r,
-            2.0,
-            1.0,
-        );
+        let mut solver = DFSPHSolver::<CubicSplineKernel, CubicSplineKernel>::new();
+        solver.max_density_error = tolerance as f32;
+        let mut world = LiquidWorld::new(solver, r, 2.0, 1.0);
         let rows = 2 * across;
         let mut fluid_points = Vec::with_capacity(across * rows);
         for j in 0..rows {
@@ -165,13 +192,27 @@ fn run_salva(across: usize, threads: usize, end_time: f64) -> Result<PeerResult,
         }
         world.add_boundary(Boundary::new(wall, InteractionGroups::default()));
         let gravity = Vector::new(0.0, -G as f32);
-        // Frames short enough that salva's CFL step never needs more than its 10
-        // substeps per frame (v <= 2 sqrt(2 g 0.6) ~ 7 m/s).
+        // v <= 2 sqrt(2 g 0.6) ~ 7 m/s
         let frame = (0.4 * ds / 7.0 * 10.0).min(0.005);
         let start = Instant::now();
         let (mut t, mut steps, mut front) = (0.0, 0u64, Vec::new());
         while t < end_time - 1e-12 {
-            let dt = frame.min(end_time - t);
+            let step = match rule {
+                SalvaStep::Fixed => frame,
+                SalvaStep::Cfl => {
+                    let v_max = world
+                        .fluids()
+                        .iter()
+                        .flat_map(|(_, f)| f.velocities.iter())
+                        .map(|v| v.norm() as f64)
+                        .fold(0.0, f64::max);
+                    match v_max > 0.0 {
+                        true => (CFL * ds / v_max).min(MAX_DT),
+                        false => MAX_DT,
+                    }
+                }
+            };
+            let dt = step.min(end_time - t);
             world.step(dt as f32, &gravity);
             steps += world.counters.nsubsteps as u64;
             t += dt;
@@ -194,6 +235,12 @@ fn run_salva(across: usize, threads: usize, end_time: f64) -> Result<PeerResult,
 }
 
 fn peer(args: &PeerArgs) -> Result<(), String> {
+    let tolerance = args.salva_tolerance;
+    if !(tolerance > 0.0 && tolerance < 1.0) {
+        return Err(format!(
+            "--salva-tolerance {tolerance}: expected a fraction of rho_0 between 0 and 1 (salva2d's default 0.05)"
+        ));
+    }
     std::fs::create_dir_all(&args.out).map_err(|e| e.to_string())?;
     let bench = BenchArgs {
         sizes: Vec::new(),
@@ -248,13 +295,26 @@ fn peer(args: &PeerArgs) -> Result<(), String> {
             "ours (DFSPH): {} particles to t = {} s in {:.2} s ({} steps)",
             dfsph.particles, dfsph.simulated_time, dfsph.wall_seconds, dfsph.steps
         );
-        let theirs = run_salva(across, args.threads, args.end_time)?;
-        eprintln!(
-            "salva2d: {} particles to t = {} s in {:.2} s ({} substeps)",
-            theirs.particles, args.end_time, theirs.wall, theirs.steps
-        );
-        let (e_salva, _, last_salva) = front_error(&theirs.front, args.end_time, 0.0);
-        let (d_salva, _, dlast_salva) = front_error(&theirs.front, args.end_time, GATE_DELAY);
+        let fixed = run_salva(
+            across,
+            args.threads,
+            args.end_time,
+            SalvaStep::Fixed,
+            args.salva_tolerance,
+        )?;
+        let theirs = run_salva(
+            across,
+            args.threads,
+            args.end_time,
+            SalvaStep::Cfl,
+            args.salva_tolerance,
+        )?;
+        for (r, how) in [(&fixed, "fixed frames"), (&theirs, "CFL steps")] {
+            eprintln!(
+                "salva2d ({how}): {} particles to t = {} s in {:.2} s ({} substeps)",
+                r.particles, args.end_time, r.wall, r.steps
+            );
+        }
         for (m, engine) in [(&ours, "ours (WCSPH, f64)"), (&dfsph, "ours (DFSPH, f64)")] {
             let (e, t_last, last) = front_error(&m.front, args.end_time, 0.0);
             let (d, _, dlast) = front_error(&m.front, args.end_time, GATE_DELAY);
@@ -282,25 +342,33 @@ fn peer(args: &PeerArgs) -> Result<(), String> {
                 100.0 * dlast
             );
         }
-        let _ = writeln!(
-            table,
-            "| {} | {:.2} | salva2d 0.11 (DFSPH, f32) | {} | | {:.2} | | {:.1} % | {:+.1} % | {:.1} % | {:+.1} % |",
-            theirs.particles,
-            1e3 * ds,
-            theirs.steps,
-            theirs.wall,
-            100.0 * e_salva,
-            100.0 * last_salva,
-            100.0 * d_salva,
-            100.0 * dlast_salva
-        );
+        for (r, how) in [
+            (&theirs, "CFL 0.4 ds/v, as ours"),
+            (&fixed, "fixed frames, 10x CFL at 7 m/s"),
+        ] {
+            let (e, _, last) = front_error(&r.front, args.end_time, 0.0);
+            let (d, _, dlast) = front_error(&r.front, args.end_time, GATE_DELAY);
+            let _ = writeln!(
+                table,
+                "| {} | {:.2} | salva2d 0.11 (DFSPH, f32; {how}) | {} | | {:.2} | | {:.1} % | {:+.1} % | {:.1} % | {:+.1} % |",
+                r.particles,
+                1e3 * ds,
+                r.steps,
+                r.wall,
+                100.0 * e,
+                100.0 * last,
+                100.0 * d,
+                100.0 * dlast
+            );
+        }
     }
     let md = format!(
-        "# Peer comparison: salva2d\n\nMartin & Moyce column (a = {A} m, n^2 = 2) in the {} m x {} m tank, to t = {} s on {} thread(s). Front error: |Z/Z_data - 1| averaged over the data points with 1 <= T <= T(t_end) (a = 2.25 in series; T = t sqrt(2g/a)), without a start delay and with the simulation delayed by the gate's {GATE_DELAY} (T units; the delay tests/tests/dam_break.rs applies, after Lethe).\n\n{table}\nNot like for like: salva2d is DFSPH (incompressible, larger steps; 'steps' counts its substeps: one per frame, since salva2d 0.11's CFL substepping is disabled, TimestepManager::compute_substep), f32 only, stopping its density solve at 5 % mean compression (ours: 0.1 % in the scenario), with Akinci boundary particles and its own artificial viscosity (coefficient 0.03, not the same formula); ours is WCSPH in f64 with mirrored ghosts and density diffusion (scenarios/dam_break.ron), or DFSPH in f64 with mirrored ghosts and a Jacobi solve (scenarios/dam_break_dfsph.ron with {}), and its time includes probes and outputs at default rates.\n",
+        "# Peer comparison: salva2d\n\nMartin & Moyce column (a = {A} m, n^2 = 2) in the {} m x {} m tank, to t = {} s on {} thread(s). Front error: |Z/Z_data - 1| averaged over the data points with 1 <= T <= T(t_end) (a = 2.25 in series; T = t sqrt(2g/a)), without a start delay and with the simulation delayed by the gate's {GATE_DELAY} (T units; the delay tests/tests/dam_break.rs applies, after Lethe).\n\n{table}\nNot like for like: salva2d is DFSPH (incompressible, larger steps; 'steps' counts its substeps: one per frame, since salva2d 0.11's CFL substepping is disabled, TimestepManager::compute_substep; the wall ratio is against the row stepped by the same CFL rule as ours, dt = {CFL} ds / max|v| at most {MAX_DT} s, which is also salva2d's own disabled rule; the fixed-frame row is the bench's earlier set-up), f32 only, stopping its density solve at {:.1} % mean compression (its default 5 %; ours: 0.1 % in the scenario), with Akinci boundary particles and its own artificial viscosity (coefficient 0.03, not the same formula); ours is WCSPH in f64 with mirrored ghosts and density diffusion (scenarios/dam_break.ron), or DFSPH in f64 with mirrored ghosts and a Jacobi solve (scenarios/dam_break_dfsph.ron with {}), and its time includes probes and outputs at default rates.\n",
         TANK.0,
         TANK.1,
         args.end_time,
         args.threads,
+        100.0 * args.salva_tolerance,
         match args.dfsph_set.iter().any(|s| !s.is_empty()) {
             true => format!("--set {}", args.dfsph_set.join(" --set ")),
             false => "no overrides".into(),
