@@ -16,7 +16,7 @@
 //!
 //! The error is the mean compression over the fluid, max(rho*_i - rho_0, 0) / rho_0.
 
-use crate::pressure_solve::{limits, Jacobi, Limits, Report, Target};
+use crate::pressure_solve::{cap_relaxation, limits, Jacobi, Limits, Report, Target};
 use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -43,8 +43,10 @@ pub struct Params {
     /// Iteration cap; a step that reaches it above the tolerance is counted in
     /// `density_solve_unconverged`. Default 100.
     pub max_iterations: u32,
-    /// Jacobi relaxation omega, 0 < omega <= 1 (docs/physics.md, "DFSPH": 1 diverges
-    /// on still water). Default 0.5.
+    /// Jacobi relaxation omega, 0 < omega <= 1. Default 0.5. Capped at setup at 85 % of
+    /// the iteration's stability bound for the run's kernel and h/ds (0.60 for the
+    /// Wendland kernel at h/ds 1.5, 0.35 at 2.0: docs/physics.md, "The relaxation's
+    /// stability bound"); the value used is `<stage>_relaxation` in summary.json.
     pub relaxation: f64,
     /// The fraction of the previous step's pressures the solve starts from (Bender &
     /// Koschier's warm start; the projected update lowers what the step does not need;
@@ -127,6 +129,7 @@ impl Stage for DensitySolve {
         require_neighbours(sim, NAME)?;
         sim.resources.insert(GhostReflections::default());
         sim.resources.insert(StepSize(0.0));
+        cap_relaxation(sim, NAME, &mut self.limits);
         self.report.open(sim, NAME, &["dt"])
     }
 

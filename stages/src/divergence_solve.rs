@@ -8,7 +8,7 @@
 //! dt the step just taken (the paper's convention); the first step (no step taken yet)
 //! keeps the initial velocities.
 
-use crate::pressure_solve::{limits, Jacobi, Limits, Report, Target};
+use crate::pressure_solve::{cap_relaxation, limits, Jacobi, Limits, Report, Target};
 use serde::{Deserialize, Serialize};
 use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure, Velocity};
 use sph_core::contract::Access;
@@ -31,8 +31,10 @@ pub struct Params {
     /// Iteration cap; a step that reaches it above the tolerance is counted in
     /// `divergence_solve_unconverged`. Default 100.
     pub max_iterations: u32,
-    /// Jacobi relaxation omega, 0 < omega <= 1 (docs/physics.md, "DFSPH": 1 diverges
-    /// on still water). Default 0.5.
+    /// Jacobi relaxation omega, 0 < omega <= 1. Default 0.5. Capped at setup at 85 % of
+    /// the iteration's stability bound for the run's kernel and h/ds (0.60 for the
+    /// Wendland kernel at h/ds 1.5, 0.35 at 2.0: docs/physics.md, "The relaxation's
+    /// stability bound"); the value used is `<stage>_relaxation` in summary.json.
     pub relaxation: f64,
 }
 
@@ -87,6 +89,7 @@ impl Stage for DivergenceSolve {
         require_neighbours(sim, NAME)?;
         // The ghosts' velocity mirrors, filled in by GhostWalls.
         sim.resources.insert(GhostReflections::default());
+        cap_relaxation(sim, NAME, &mut self.limits);
         self.report.open(sim, NAME, &[])
     }
 
