@@ -194,6 +194,20 @@ impl Stage for DensitySolve {
             .jacobi
             .solve_with_factors(sim, dt, Target::Density, self.limits, true);
         let outcome = solved?;
+        let floor = sim
+            .resources
+            .get::<DfsphFactors>()
+            .is_some_and(|f| f.continuity_floor);
+        if floor {
+            // The predicted density rho + dt D rho/Dt at the final velocities: the
+            // continuity density the next step's DfsphFactor floors its sums with.
+            if let Some(fluid) = archetype::<Fluid>(&sim.world) {
+                column_mut::<Density>(fluid)?
+                    .par_iter_mut()
+                    .zip(self.jacobi.rate.par_iter())
+                    .for_each(|(rho, rate)| rho.0 += dt * rate);
+            }
+        }
         let acc: &[DVec2] = &self.jacobi.acc;
         if let Some(fluid) = archetype::<Fluid>(&sim.world) {
             column_mut::<Acceleration>(fluid)?
@@ -213,7 +227,7 @@ impl Stage for DensitySolve {
             .reads::<GhostReflections>()
             .reads::<Position>()
             .reads::<Mass>()
-            .reads::<Density>()
+            .updates::<Density>()
             .reads::<Clock>()
             .updates::<Acceleration>()
             .updates::<Velocity>()

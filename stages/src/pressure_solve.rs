@@ -107,8 +107,8 @@ pub(crate) struct Jacobi {
     /// Fluid and ghost velocities before the pressure acts.
     base: Vec<DVec2>,
     ghost_base: Vec<DVec2>,
-    /// D rho/Dt of each fluid particle.
-    rate: Vec<f64>,
+    /// D rho/Dt of each fluid particle; after a solve, at its final velocities.
+    pub rate: Vec<f64>,
     /// The pressure acceleration of each fluid particle.
     pub acc: Vec<DVec2>,
 }

@@ -139,15 +139,12 @@ fn small_roll_response_peaks_at_the_first_natural_frequency_and_matches_linear_t
 
 /// The same sweep with the DFSPH pipeline (docs/physics.md, "DFSPH") in place of the
 /// tank's weakly-compressible one: the same walls, viscosity and roll-moment probe.
-/// It fails: the response peaks at 0.961 sigma_1 (0.956 before the solves' projected
-/// update; 0.928 with the density solve's tolerance at 0.01 %), outside the 3 % the
-/// WCSPH pipeline meets. The phase crosses
-/// -90 degrees at sigma_1, but the pipeline over-damps the mode (resonant amplitude 38 %
-/// of linear theory's at the default step, 54 % at 1 ms), which moves the fitted peak
-/// (docs/validation.md, "DFSPH"). Kept, ignored, until the damping is reduced:
-/// `cargo test --release -p sph-tests --test sloshing -- --ignored dfsph`.
+/// Measured: peak at 0.999 sigma_1, resonant amplitude 17.96 N m (linear theory 16.05,
+/// WCSPH 17.7). With `DfsphFactor(continuity_floor: false)` (summation density alone)
+/// it fails: the under-dense surface rows carry no pressure, the mode is over-damped
+/// (resonant amplitude 6.4 N m) and the fitted peak moves to 0.961 sigma_1
+/// (docs/validation.md, "DFSPH").
 #[test]
-#[ignore = "fails: DFSPH over-damps the mode, its response peaks at 0.961 sigma_1 (docs/validation.md, DFSPH)"]
 fn small_roll_response_with_dfsph_peaks_at_the_first_natural_frequency() {
     let pipeline = "pipeline=[GhostWalls(slip: FreeSlip, hydrostatic: true), NeighbourGrid(), \
         DfsphFactor(), DivergenceSolve(), Forces(terms: [ArtificialViscosity(alpha: 0.03)]), \

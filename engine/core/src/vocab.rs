@@ -510,6 +510,11 @@ pub struct DfsphFactors {
     pub alpha: Vec<f64>,
     /// Pressure carried to each ghost [Pa], archetype order.
     pub ghost_offset: Vec<f64>,
+    /// `DfsphFactor(continuity_floor: true)`: the density solve leaves each fluid
+    /// particle's predicted density rho_i + dt D rho_i/Dt (final velocities) in the
+    /// `Density` column, the continuity density the next step's factor stage floors the
+    /// summation density with.
+    pub continuity_floor: bool,
 }
 
 /// The step the pressure solve chose (from the velocity CFL condition), for the stage
