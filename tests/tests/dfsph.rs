@@ -16,7 +16,7 @@ fn dfsph_still_water_holds_hydrostatic_pressure_at_rest_density() {
         SCENE,
         "scenarios/hydrostatic_dfsph.ron",
         &[
-            "end_time=1.5",
+            "end_time=3.0",
             "pipeline.vtk_frames.interval=10.0",
             "pipeline.probe.plots=false",
         ],
@@ -30,7 +30,8 @@ fn dfsph_still_water_holds_hydrostatic_pressure_at_rest_density() {
     // Pressure: below the surface layer (two supports deep), the mean pressure of each
     // 5 cm layer within 1 % of rho_0 g H of rho_0 g (H - y) at the layer's mean depth,
     // the tolerance. (The kernel's discrete gradient moment, 0.997 for
-    // Wendland at h/ds = 1.5, biases the equilibrium by ~0.3 %.) The layers, not each
+    // Wendland at h/ds = 1.5 and 0.9992 at 2.0, biases the equilibrium by ~0.3 % or
+    // less.) The layers, not each
     // particle: the Jacobi solve stops at a mean density error of 0.1 %, which leaves
     // each particle's pressure scattered about the profile (RMS ~1 %, the worst 2 % of
     // rho_0 g H, docs/validation.md, "DFSPH"); that scatter is checked below 2 %.
@@ -123,12 +124,11 @@ fn dfsph_still_water_holds_hydrostatic_pressure_at_rest_density() {
     }
 
     // Speeds: the start-up transient (the lattice settling under the solved pressure)
-    // decays tenfold within 0.2 s, and the water stays still to 5 % of sqrt(g H) after
-    // it. (Not 1 % as for WCSPH: a mode of the top four rows grows from round-off at
-    // about 11.5 /s, whatever the solves' settings, shows from 2.4 s on (the speed
-    // below 0.0003 m/s until then) and saturates at about 1 % of sqrt(g H); with the
-    // earlier raise-only update a shear mode reached 1-3 % within the first second;
-    // docs/validation.md, "DFSPH".)
+    // decays tenfold within 0.2 s, and the water stays still to 0.1 % of sqrt(g H)
+    // (2.4 mm/s) after it, for the 3 s (measured 0.2 mm/s). This bound fails for the
+    // modes that grow from round-off and show from about 2.4 s: at h/ds 1.5 (rows
+    // sliding, 0.025 m/s by 3 s), and without the continuity floor (the surface rows,
+    // 0.033 m/s by 3 s; docs/validation.md, "DFSPH").
     let speed = series(&probes, "max_speed");
     let peak = |from: f64, to: f64| {
         speed
@@ -142,7 +142,7 @@ fn dfsph_still_water_holds_hydrostatic_pressure_at_rest_density() {
         settled < 0.1 * start,
         "start-up speed {start} m/s decayed only to {settled} m/s"
     );
-    let bound = 0.05 * (g * h).sqrt();
+    let bound = 0.001 * (g * h).sqrt();
     let later = peak(0.15, 10.0);
     assert!(later < bound, "max speed {later} m/s exceeds {bound} m/s");
 }
@@ -176,7 +176,7 @@ fn dfsph_still_water_runs_at_h_over_ds_2_with_the_relaxation_capped() {
     }
     assert_eq!(d.get("wall_reflections"), None, "{d:?}");
     // The bottom sensor after the start-up: the time mean within 1 % of rho_0 g H (the
-    // tolerance of the h/ds = 1.5 test above; measured -0.2 to +0.5 %).
+    // tolerance of the test above; measured -0.2 to +0.6 %).
     let probes = out.join("probes.csv");
     for method in ["shepard", "nearest", "averaged"] {
         let samples: Vec<f64> = series(&probes, &format!("bottom.{method}"))
