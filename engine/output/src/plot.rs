@@ -122,7 +122,14 @@ pub fn draw_series_plot(
             .flat_map(|s| s.points.iter())
             .filter(|(x, y)| x.is_finite() && y.is_finite())
     };
-    let (x0, x1) = axis_range(finite().map(|p| p.0), 0.0);
+    // Time series end where their data end; a plot with point markers (a study's
+    // cases) gets the y axis's 5 % either side, so that a marker at the extremes is
+    // drawn whole rather than cut in half by the frame.
+    let x_pad = match series.iter().any(|s| s.style == Style::Points) {
+        true => 0.05,
+        false => 0.0,
+    };
+    let (x0, x1) = axis_range(finite().map(|p| p.0), x_pad);
     let (y0, y1) = axis_range(finite().map(|p| p.1), 0.05);
 
     let fs = 15;
@@ -729,6 +736,52 @@ pub mod tests {
         let bottom = columns.iter().map(|c| c.2).max().unwrap();
         assert_eq!(top, f.row(10.0).round() as i32);
         assert_eq!(bottom, f.row(-3.0).round() as i32);
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Point markers at the data's extremes are drawn whole, inside the plotting area
+    /// (the x axis is padded for point series), while a line's x axis ends at its data.
+    #[test]
+    fn markers_at_the_extremes_are_drawn_whole() {
+        let dir = test_dir("plot_markers");
+        let series = [
+            Series {
+                name: "cases".into(),
+                points: vec![(1.0, 0.27), (4.4, 0.267), (17.7, 0.27)],
+                style: Style::Points,
+            },
+            Series {
+                name: "front".into(),
+                points: vec![(1.0, 0.27), (4.4, 0.267)],
+                style: Style::Line,
+            },
+        ];
+        let path = dir.join("markers.png");
+        let f = draw_series_plot(&path, "markers", "wall time [s]", "error", &series).unwrap();
+        let img = assert_png(&path, PLOT_SIZE);
+        let columns: Vec<i32> = pixels_of(&img, &f, PALETTE[0])
+            .into_iter()
+            .map(|p| p.0)
+            .collect();
+        for x in [1.0, 17.7] {
+            let c = f.column(x).round() as i32;
+            // The marker's radius is 3 px: columns c - 2 and c + 2 both drawn.
+            for d in [-2, 2] {
+                assert!(
+                    columns.contains(&(c + d)),
+                    "marker at x = {x}: column {} not drawn (frame {:?})",
+                    c + d,
+                    f.x
+                );
+            }
+        }
+        let line = [Series {
+            name: "line".into(),
+            points: vec![(1.0, 0.0), (17.7, 1.0)],
+            style: Style::Line,
+        }];
+        let f = draw_series_plot(&dir.join("line.png"), "line", "t", "y", &line).unwrap();
+        assert_eq!(f.x, (1.0, 17.7));
         fs::remove_dir_all(&dir).unwrap();
     }
 
