@@ -140,9 +140,8 @@ impl Stage for DfsphFactor {
         // for (the term reads geometry and mass only).
         let fields = Fields::of(&[Field::Rho]);
         each(sim, &DensityFactor { w0 }, fields, &mut self.out, |o| o)?;
-        if self.continuity_floor {
-            // The column holds the last density solve's prediction (rho_0 at the start).
-            let fluid = archetype::<Fluid>(&sim.world).expect("checked above");
+        // The column holds the last density solve's prediction (rho_0 at the start).
+        if let (true, Some(fluid)) = (self.continuity_floor, archetype::<Fluid>(&sim.world)) {
             let rho_c = column::<Density>(fluid)?;
             self.out
                 .par_iter_mut()

@@ -382,7 +382,7 @@ fn run<T: PairTerm, K: Kernel, O: Send>(
 }
 
 /// The share of the lattice's Jacobi stability bound that the relaxation is capped at
-/// ([`capped_relaxation`]): uniform-lattice sums stand for the fluid, and compressed or
+/// ([`cap_relaxation`]): uniform-lattice sums stand for the fluid, and compressed or
 /// disordered regions hold more neighbours, so a margin is kept. 85 % leaves the usual
 /// omega = 0.5 untouched up to h/ds = 1.5 (bound 0.599 for the Wendland kernel) and caps
 /// it from about h/ds = 1.55 on.
@@ -400,7 +400,8 @@ pub(crate) const RELAXATION_MARGIN: f64 = 0.85;
 /// omega lambda(k) < 2 for every k. lambda_max grows with the neighbours a kernel
 /// reaches (Wendland: 2.60 at h/ds 1.3, 3.34 at 1.5, 5.68 at 2.0), which is why
 /// omega = 0.5 diverges from h/ds = 1.7 on (docs/physics.md, "DFSPH").
-/// lambda is maximised over k in [0, pi/ds]^2 by a grid search refined three times.
+/// lambda is maximised over k in [0, pi]^2 (per lattice step; the other quadrants
+/// mirror it) by a grid search refined three times.
 /// Returns infinity (no cap) where there is nothing to bound: a spacing that is not a
 /// positive number, a support wider than 32 ds, or a kernel without a gradient.
 pub(crate) fn jacobi_bound<K: Kernel>(kernel: &K, ds: f64) -> f64 {
@@ -579,7 +580,7 @@ impl Report {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use sph_core::kernel::{Cubic, Wendland};
+    use sph_core::kernel::{KernelKind, Wendland};
 
     /// lambda_max of D^-1 A by power iteration on a periodic n x n lattice (ds = 1,
     /// m = rho = dt = 1), applying the solve's operator pair by pair as the module docs
@@ -642,32 +643,20 @@ mod tests {
         // The periodic 40 x 40 lattice has k only on multiples of 2 pi / 40, so its
         // lambda_max may fall short of the continuous maximum by the curvature of a
         // broad peak over half a grid step: 1 % (measured 0.0-0.3 %).
-        for (name, bound, lambda) in [
-            (
-                "Wendland h/ds 1.3",
-                jacobi_bound(&Wendland::new(1.3), 1.0),
-                power_iteration(&Wendland::new(1.3), 40),
-            ),
-            (
-                "Wendland h/ds 1.5",
-                jacobi_bound(&Wendland::new(1.5), 1.0),
-                power_iteration(&Wendland::new(1.5), 40),
-            ),
-            (
-                "Wendland h/ds 2.0",
-                jacobi_bound(&Wendland::new(2.0), 1.0),
-                power_iteration(&Wendland::new(2.0), 40),
-            ),
-            (
-                "Cubic h/ds 1.3",
-                jacobi_bound(&Cubic::new(1.3), 1.0),
-                power_iteration(&Cubic::new(1.3), 40),
-            ),
+        for (kind, h_over_ds) in [
+            (KernelKind::Wendland, 1.3),
+            (KernelKind::Wendland, 1.5),
+            (KernelKind::Wendland, 2.0),
+            (KernelKind::Cubic, 1.3),
         ] {
+            let (bound, lambda) = with_kernel!(kind, h_over_ds, |k| (
+                jacobi_bound(&k, 1.0),
+                power_iteration(&k, 40)
+            ));
             let from_bound = 2.0 / bound;
             assert!(
                 (lambda / from_bound - 1.0).abs() < 0.01,
-                "{name}: lambda_max {from_bound:.4} from the bound, {lambda:.4} by power iteration"
+                "{kind:?} h/ds {h_over_ds}: lambda_max {from_bound:.4} from the bound, {lambda:.4} by power iteration"
             );
         }
         // The omega = 0.5 the scenarios use is inside the capped range up to h/ds 1.5
