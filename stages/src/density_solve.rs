@@ -27,7 +27,9 @@ use sph_core::components::{
 use sph_core::contract::Access;
 use sph_core::sim::{Clock, Sim};
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{require_neighbours, DfsphFactors, GhostReflections, Neighbours, StepSize};
+use sph_core::vocab::{
+    require_neighbours, DfsphFactors, GhostReflections, Neighbours, NoSlipVelocities, StepSize,
+};
 use sph_core::world::{archetype, column, column_mut};
 use sph_core::StageRegistry;
 
@@ -189,6 +191,10 @@ impl Stage for DensitySolve {
                     .enumerate()
                     .for_each(|(k, v)| v.0 += dt * mirror.apply(k, a[source[k].source as usize].0));
             }
+        }
+        if sim.resources.contains::<NoSlipVelocities>() {
+            let a: Vec<DVec2> = column::<Acceleration>(fluid)?.iter().map(|a| a.0).collect();
+            crate::pressure_solve::shift_no_slip(sim, |s| dt * a[s])?;
         }
         let solved = self
             .jacobi

@@ -13,8 +13,8 @@ use sph_core::contract::Access;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{
-    require_neighbours, ArtificialViscosity, DensityGradients, DiffusionPower,
-    NeighbourCountsInPass, Neighbours, ViscousDissipation, WallPower,
+    require_neighbours, ArtificialViscosity, DensityGradients, DiffusionPower, GhostSettings,
+    NeighbourCountsInPass, Neighbours, NoSlipVelocities, ViscousDissipation, WallPower,
 };
 use sph_core::world::{archetype, ensure_component};
 use sph_core::StageRegistry;
@@ -73,7 +73,11 @@ impl Stage for Forces {
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         require_neighbours(sim, "forces")?;
-        self.terms = RateTerms::build(&self.params.terms, &sim.constants);
+        let no_slip = sim
+            .resources
+            .get::<GhostSettings>()
+            .is_some_and(|g| g.no_slip);
+        self.terms = RateTerms::build(&self.params.terms, &sim.constants, no_slip);
         ensure_component::<Fluid, Acceleration>(sim);
         if self.terms.continuity.is_some() {
             ensure_component::<Fluid, DensityRate>(sim);
@@ -148,7 +152,9 @@ impl Stage for Forces {
             .writes::<ViscousDissipation>()
             .writes::<DiffusionPower>()
             .writes::<WallPower>()
-            .uses::<NeighbourCount>();
+            .uses::<NeighbourCount>()
+            .uses::<GhostSettings>()
+            .uses::<NoSlipVelocities>();
         match viscosity {
             Some(v) => access.exposes(v),
             None => access,

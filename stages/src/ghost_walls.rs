@@ -20,8 +20,10 @@
 //!
 //! Moving walls (a rolling tank): walls are mirrored where they are at the current
 //! time, and velocities are mirrored relative to the wall's own velocity v_w at the
-//! foot of the particle on the wall: free slip reverses the normal component of
-//! v - v_w, no slip gives 2 v_w - v. The hydrostatic correction uses the effective
+//! foot of the particle on the wall: a ghost's `Velocity` reverses the normal
+//! component of v - v_w (no flow through the wall) whatever the slip, and with
+//! `slip: NoSlip` the viscous terms read 2 v_w - v instead (`vocab::NoSlipVelocities`;
+//! Adami, Hu & Adams 2012, sec. 2.3). The hydrostatic correction uses the effective
 //! gravity g - a_w of the tank frame, a_w the tank's rigid acceleration at the source.
 
 use glam::DVec2;
@@ -33,19 +35,20 @@ use sph_core::contract::Access;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{
-    ghost_density, GhostReflections, GhostSettings, ListPlan, MirrorWall, Neighbours, WallPose,
-    Walls,
+    ghost_density, GhostReflections, GhostSettings, ListPlan, MirrorWall, Neighbours,
+    NoSlipVelocities, WallPose, Walls,
 };
 use sph_core::walls::WallLine;
 use sph_core::world::{archetype, column, column_mut, count};
 use sph_core::StageRegistry;
 
-/// Tangential velocity condition at the walls.
+/// Tangential velocity condition at the walls, for the viscous terms (continuity and
+/// the pressure solves see the normal component mirrored either way).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Slip {
     /// Tangential velocity mirrored unchanged (no wall shear).
     FreeSlip,
-    /// Tangential velocity reversed (zero velocity at the wall).
+    /// Tangential velocity reversed in the viscous terms (zero velocity at the wall).
     NoSlip,
 }
 
@@ -128,9 +131,14 @@ impl Stage for GhostWalls {
                 "the scenario has no walls; remove GhostWalls() or add a `tank` or `walls`",
             ));
         }
+        let no_slip = self.params.slip == Slip::NoSlip;
         sim.resources.insert(GhostSettings {
             hydrostatic: self.params.hydrostatic,
+            no_slip,
         });
+        if no_slip {
+            sim.resources.insert(NoSlipVelocities::default());
+        }
         Ok(())
     }
 
@@ -235,6 +243,7 @@ impl Stage for GhostWalls {
             .writes::<MirrorWall>()
             .writes::<GhostSettings>()
             .writes::<GhostReflections>()
+            .writes::<NoSlipVelocities>()
     }
 }
 
@@ -266,10 +275,37 @@ impl GhostWalls {
         // Only when a stage asked for them (the DFSPH solves); the walls move with the
         // tank, so every step.
         if let Some(r) = sim.resources.get_mut::<GhostReflections>() {
-            let (lines, slip) = (self.walls.lines(), self.params.slip);
+            let lines = self.walls.lines();
             r.0.clear();
-            r.0.extend(images.iter().map(|img| reflection(lines, img, slip)));
+            r.0.extend(images.iter().map(|img| reflection(lines, img)));
         }
+        // The no-slip velocities (written below), one per ghost.
+        let mut no_slip = sim.resources.take::<NoSlipVelocities>();
+        if let Some(ns) = &mut no_slip {
+            ns.velocity.resize(images.len(), DVec2::ZERO);
+            ns.sign.clear();
+            ns.sign.extend(
+                images
+                    .iter()
+                    .map(|img| if img.second.is_some() { 1.0 } else { -1.0 }),
+            );
+        }
+        let result = self.mirror_into(sim, renew, no_slip.as_mut().map(|n| &mut n.velocity[..]));
+        if let Some(ns) = no_slip {
+            sim.resources.insert(ns);
+        }
+        result
+    }
+
+    /// [`GhostWalls::mirror`] into the world's ghost columns, and each ghost's no-slip
+    /// velocity into `no_slip` when given.
+    fn mirror_into(
+        &self,
+        sim: &mut Sim,
+        renew: bool,
+        no_slip: Option<&mut [DVec2]>,
+    ) -> Result<(), StepError> {
+        let images = &self.images[..];
         let Some(fluid) = archetype::<Fluid>(&sim.world) else {
             return Ok(());
         };
@@ -302,7 +338,6 @@ impl GhostWalls {
             .then_some((sim.constants.eos, sim.constants.gravity));
         let (walls, lines) = (self.walls.now(), self.walls.lines());
         let entities = self.walls.entities();
-        let slip = self.params.slip;
         let near = near_rule(sim, 0.0);
         (
             (&mut gs[..], &mut gw[..]),
@@ -324,7 +359,7 @@ impl GhostWalls {
                 for k in std::iter::once(img.first).chain(img.second) {
                     let k = k as usize;
                     active &= near(&lines[k], fx[s].0);
-                    vel = mirror_velocity(&lines[k], &walls[k], pos, vel, slip);
+                    vel = mirror_velocity(&lines[k], &walls[k], pos, vel, Slip::FreeSlip);
                     pos = lines[k].mirror(pos);
                 }
                 x.0 = pos;
@@ -333,6 +368,18 @@ impl GhostWalls {
                 let body = walls[img.first as usize].body;
                 rho.0 = ghost_density(fr[s].0, fx[s].0, pos, correction.map(|c| (c, body)));
             });
+        if let Some(ns) = no_slip {
+            ns.par_iter_mut().zip(images).for_each(|(out, img)| {
+                let s = img.source as usize;
+                let (mut pos, mut vel) = (fx[s].0, fv[s].0);
+                for k in std::iter::once(img.first).chain(img.second) {
+                    let k = k as usize;
+                    vel = mirror_velocity(&lines[k], &walls[k], pos, vel, Slip::NoSlip);
+                    pos = lines[k].mirror(pos);
+                }
+                *out = vel;
+            });
+        }
         Ok(())
     }
 
@@ -410,22 +457,19 @@ fn mirror_velocity(line: &WallLine, w: &WallPose, x: DVec2, v: DVec2, slip: Slip
     }
 }
 
-/// The linear part of a ghost's velocity mirror (see [`GhostReflections`]): the
-/// product of each crossed wall's, I - 2 n n^T for free slip and -I for no slip, the
-/// linear parts of [`mirror_velocity`].
-fn reflection(lines: &[WallLine], img: &Image, slip: Slip) -> [f64; 4] {
+/// The linear part of a ghost's `Velocity` mirror (see [`GhostReflections`]): the
+/// product of each crossed wall's I - 2 n n^T, the linear part of [`mirror_velocity`]
+/// with free slip.
+fn reflection(lines: &[WallLine], img: &Image) -> [f64; 4] {
     let mut m = [1.0, 0.0, 0.0, 1.0];
     for k in std::iter::once(img.first).chain(img.second) {
         let n = lines[k as usize].normal;
-        let l = match slip {
-            Slip::FreeSlip => [
-                1.0 - 2.0 * n.x * n.x,
-                -2.0 * n.x * n.y,
-                -2.0 * n.y * n.x,
-                1.0 - 2.0 * n.y * n.y,
-            ],
-            Slip::NoSlip => [-1.0, 0.0, 0.0, -1.0],
-        };
+        let l = [
+            1.0 - 2.0 * n.x * n.x,
+            -2.0 * n.x * n.y,
+            -2.0 * n.y * n.x,
+            1.0 - 2.0 * n.y * n.y,
+        ];
         m = [
             l[0] * m[0] + l[1] * m[2],
             l[0] * m[1] + l[1] * m[3],

@@ -62,7 +62,7 @@ use sph_core::pair::{
 };
 use sph_core::sim::Sim;
 use sph_core::stage::StepError;
-use sph_core::vocab::{DfsphFactors, GhostReflections, Neighbours};
+use sph_core::vocab::{DfsphFactors, GhostReflections, Neighbours, NoSlipVelocities};
 use sph_core::with_kernel;
 use sph_core::world::{archetype, column, column_mut, sum_fixed};
 
@@ -115,7 +115,8 @@ pub(crate) struct Jacobi {
 
 impl Jacobi {
     /// [`Jacobi::solve`] with the step's `DfsphFactors`: the factors, and the ghosts'
-    /// pressure carries if `carry` (else none).
+    /// pressure carries if `carry` (else none); the ghosts' no-slip velocities
+    /// (`NoSlipVelocities`, walls that do not slip) then follow their sources' change.
     pub(crate) fn solve_with_factors(
         &mut self,
         sim: &mut Sim,
@@ -132,7 +133,13 @@ impl Jacobi {
         let offsets = if carry { &factors.ghost_offset } else { &zeros };
         let solved = self.solve(sim, dt, target, limits, &factors.alpha, offsets);
         sim.resources.insert(factors);
-        solved
+        let outcome = solved?;
+        // The ghosts' no-slip velocities follow their sources' change too.
+        let (base, acc) = (&self.base, &self.acc);
+        if acc.len() == base.len() {
+            shift_no_slip(sim, |s| dt * acc[s])?;
+        }
+        Ok(outcome)
     }
 
     /// Solves for the pressures in the `Pressure` column, starting from the fluid's
@@ -306,6 +313,38 @@ fn residual(target: Target, dt: f64, rho0: f64, rho: f64, rate: f64) -> f64 {
         Target::Divergence => dt * rate,
         Target::Density => rho - rho0 + dt * rate,
     }
+}
+
+/// Changes every ghost's no-slip velocity (`NoSlipVelocities`, when the walls do not
+/// slip) by the mirror of its source's velocity change `dv(source)`.
+pub(crate) fn shift_no_slip(
+    sim: &mut Sim,
+    dv: impl Fn(usize) -> DVec2 + Sync,
+) -> Result<(), StepError> {
+    let Some(ghost) = archetype::<Ghost>(&sim.world) else {
+        return Ok(());
+    };
+    let Some(mut ns) = sim.resources.take::<NoSlipVelocities>() else {
+        return Ok(());
+    };
+    let source = column::<Ghost>(ghost)?;
+    let source: &[Ghost] = &source;
+    let result = if ns.velocity.len() != source.len() || ns.sign.len() != source.len() {
+        Err(StepError::Internal(format!(
+            "{} ghosts but {} no-slip velocities: GhostWalls must run before the solves",
+            source.len(),
+            ns.velocity.len()
+        )))
+    } else {
+        let sign = &ns.sign;
+        ns.velocity
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(k, v)| *v += sign[k] * dv(source[k].source as usize));
+        Ok(())
+    };
+    sim.resources.insert(ns);
+    result
 }
 
 /// Sets every ghost's pressure to its source's plus its carry, at least 0.

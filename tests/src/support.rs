@@ -80,6 +80,22 @@ pub fn reference(file: &str) -> Vec<(f64, f64)> {
 /// Linear interpolation of a time series at `t` (clamped at the ends).
 pub use sph_study::study::metrics::interpolate;
 
+/// The surge front of a run of Martin & Moyce's column (width `a` [m]) in their
+/// normalisation, (T, Z) = (t sqrt(2g/a), x/a), from the run's `probes.csv`; asserts
+/// that the front never moves back.
+pub fn surge_front(out: &Path, a: f64) -> Vec<(f64, f64)> {
+    let scale = (2.0 * 9.81 / a).sqrt();
+    let front: Vec<(f64, f64)> = series(&out.join("probes.csv"), "front")
+        .iter()
+        .map(|&(t, x)| (t * scale, x / a))
+        .collect();
+    assert!(
+        front.windows(2).all(|w| w[1].1 >= w[0].1 - 1e-9),
+        "front moved back"
+    );
+    front
+}
+
 #[cfg(test)]
 mod tests {
     use super::nan_max;

@@ -25,6 +25,8 @@
 //! - [`ContinuityInPipeline`]: marks that a continuity stage writes the density rate.
 //! - [`GhostSettings`], [`refresh_ghost_density`]: how ghost densities follow their
 //!   sources (for a stage that changes fluid densities after the ghosts were placed).
+//! - [`GhostReflections`], [`NoSlipVelocities`]: how ghost velocities follow their
+//!   sources', and the ghosts' no-slip velocities for the viscous terms.
 //! - [`require_neighbours`]: the setup check of the stages that sum over neighbours.
 //!
 //! - The scene as the world holds it, re-exported here: [`WallPose`] (each wall now),
@@ -406,6 +408,8 @@ pub struct ContinuityInPipeline;
 pub struct GhostSettings {
     /// The hydrostatic correction is on.
     pub hydrostatic: bool,
+    /// The walls do not slip: the viscous terms read the ghosts' [`NoSlipVelocities`].
+    pub no_slip: bool,
 }
 
 /// Ghost density: the source's, or with the hydrostatic correction the density whose
@@ -479,7 +483,8 @@ pub fn refresh_ghost_density(sim: &Sim) -> Result<(), StepError> {
 
 /// The linear part of each ghost's velocity mirror, fluid-to-ghost, one 2x2 matrix
 /// `[xx, xy, yx, yy]` per ghost in archetype order: a change dv of a source's velocity
-/// changes its ghost's by L dv (free slip: I - 2 n n^T per wall crossed; no slip: -I).
+/// changes its ghost's by L dv (I - 2 n n^T per wall crossed: a ghost's `Velocity`
+/// mirrors the normal component whatever the walls' slip, see [`NoSlipVelocities`]).
 /// Asked for by a stage that changes fluid velocities after the ghosts were placed
 /// (the DFSPH solves, which keep the ghosts' velocities mirrored during their
 /// iterations) by inserting it; filled in by `GhostWalls` every step.
@@ -493,6 +498,25 @@ impl GhostReflections {
         let l = self.0[k];
         DVec2::new(l[0] * v.x + l[1] * v.y, l[2] * v.x + l[3] * v.y)
     }
+}
+
+/// With walls that do not slip (`GhostWalls(slip: NoSlip)`): every ghost's no-slip
+/// velocity 2 v_w - v of its source (applied across each wall it was mirrored across),
+/// in ghost archetype order, which the viscous terms read (`pair::Field::ShearVx`);
+/// the ghost's `Velocity`, which continuity and the pressure solves read, mirrors the
+/// normal component only. Reversing the tangential velocity in the continuity equation
+/// makes a flow along the wall that speeds up or slows down (du/dx != 0) look
+/// compressed or stretched at the wall; a dam break's surge then blew up (Adami, Hu &
+/// Adams 2012, sec. 2.3, use the no-slip velocity in the viscous term only).
+/// Inserted by `GhostWalls` at setup, filled every step; a stage that changes fluid
+/// velocities after the ghosts were placed changes ghost k's by `sign[k]` times its
+/// source's change (the linear part of the mirror, +-I).
+#[derive(Debug, Default, Clone)]
+pub struct NoSlipVelocities {
+    /// [m/s]
+    pub velocity: Vec<DVec2>,
+    /// (-1)^(walls crossed).
+    pub sign: Vec<f64>,
 }
 
 /// The divergence-free SPH factors of one step (Bender & Koschier 2017, eq. 11, in

@@ -36,6 +36,8 @@ pub struct ArtificialViscosity {
     h: f64,
     /// eta^2 = 0.01 h^2.
     eta2: f64,
+    /// v_ij from the ghosts' no-slip velocities ([`Term::wall_shear`]).
+    shear: bool,
 }
 
 impl ArtificialViscosity {
@@ -57,19 +59,29 @@ impl Term for ArtificialViscosity {
             beta: p.beta,
             h: c.h,
             eta2: 0.01 * c.h * c.h,
+            shear: false,
         }
+    }
+    fn wall_shear(&mut self) {
+        self.shear = true;
     }
 }
 
 impl RateTerm for ArtificialViscosity {
     fn reads(&self) -> Fields {
-        <Self as Term>::READS
+        match self.shear {
+            true => <Self as Term>::READS.with(Fields::SHEAR),
+            false => <Self as Term>::READS,
+        }
     }
     const USES_COEF: bool = true;
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
         let c = L::splat;
-        let (wx, wy) = p.v_ij(me);
+        let (wx, wy) = match self.shear {
+            true => p.shear_v_ij(me),
+            false => p.v_ij(me),
+        };
         let vx = wx * p.dx + wy * p.dy;
         let d = p.r * p.r + c(self.eta2);
         let cbar = c(0.5) * (me.lanes::<L>(Field::Sound) + p.j(Field::Sound));

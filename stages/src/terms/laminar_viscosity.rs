@@ -31,6 +31,8 @@ pub struct LaminarViscosity {
     mu_sum: f64,
     /// eta^2 = 0.01 h^2.
     eta2: f64,
+    /// v_ij from the ghosts' no-slip velocities ([`Term::wall_shear`]).
+    shear: bool,
 }
 
 impl Term for LaminarViscosity {
@@ -43,18 +45,28 @@ impl Term for LaminarViscosity {
         Self {
             mu_sum: 2.0 * c.eos.rho0 * p.nu,
             eta2: 0.01 * c.h * c.h,
+            shear: false,
         }
+    }
+    fn wall_shear(&mut self) {
+        self.shear = true;
     }
 }
 
 impl RateTerm for LaminarViscosity {
     fn reads(&self) -> Fields {
-        <Self as Term>::READS
+        match self.shear {
+            true => <Self as Term>::READS.with(Fields::SHEAR),
+            false => <Self as Term>::READS,
+        }
     }
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
         let c = L::splat;
-        let (wx, wy) = p.v_ij(me);
+        let (wx, wy) = match self.shear {
+            true => p.shear_v_ij(me),
+            false => p.v_ij(me),
+        };
         let x_grad = p.dx * p.gx + p.dy * p.gy;
         let rho_ij = me.lanes::<L>(Field::Rho) * p.j(Field::Rho);
         let k = c(self.mu_sum) * x_grad / (rho_ij * (p.r * p.r + c(self.eta2)));

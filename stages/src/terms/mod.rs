@@ -43,6 +43,10 @@ pub trait Term: RateTerm + Sized {
     }
     /// The term for a run with constants `c`, from checked parameters.
     fn build(p: &Self::Params, c: &Constants) -> Self;
+    /// For a viscous term: read the ghosts' no-slip velocities (`Field::ShearVx`,
+    /// `ShearVy`; the walls do not slip) instead of their `Vx`, `Vy`. Other terms
+    /// ignore it.
+    fn wall_shear(&mut self) {}
 }
 
 /// Checks that every `(field, value)` is a finite number >= 0.
@@ -120,7 +124,7 @@ macro_rules! rate_terms {
             fn reads(&self) -> Fields {
                 let mut f = Fields::default();
                 $(if SET & (1 << TermBit::$ty as u16) != 0 {
-                    f = f.with(<$module::$ty as Term>::READS);
+                    f = f.with(self.$module.reads());
                 })*
                 f
             }
@@ -174,12 +178,20 @@ macro_rules! rate_terms {
                 0 $(| if self.$module.is_some() { 1 << TermBit::$ty as u16 } else { 0 })*
             }
 
-            /// The terms of a checked list for a run with constants `c`.
-            pub fn build(specs: &[TermSpec], c: &Constants) -> Self {
+            /// The terms of a checked list for a run with constants `c`; with
+            /// `wall_shear` the viscous terms read the ghosts' no-slip velocities
+            /// ([`Term::wall_shear`]).
+            pub fn build(specs: &[TermSpec], c: &Constants, wall_shear: bool) -> Self {
                 let mut set = RateTerms::default();
                 for spec in specs {
                     match spec {
-                        $(TermSpec::$ty(p) => set.$module = Some($module::$ty::build(p, c)),)*
+                        $(TermSpec::$ty(p) => {
+                            let mut t = $module::$ty::build(p, c);
+                            if wall_shear {
+                                t.wall_shear();
+                            }
+                            set.$module = Some(t);
+                        })*
                     }
                 }
                 set

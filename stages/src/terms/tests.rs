@@ -10,7 +10,7 @@ use glam::DVec2;
 use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure, Velocity};
 use sph_core::kernel::{Kernel, KernelKind, Wendland};
 use sph_core::pair::PairTerm;
-use sph_core::pair::{EquationsOfMotion, Field, Isa, Pass, RateTerm, Records};
+use sph_core::pair::{EquationsOfMotion, Field, Isa, Packed, Pass, RateTerm, Records};
 use sph_core::sim::{Constants, Tait};
 use sph_core::world::Particles;
 
@@ -61,7 +61,10 @@ fn packed(world: &hecs::World, fields: sph_core::pair::Fields) -> Records {
         &Particles::of(world).unwrap(),
         fields,
         &constants().eos,
-        grads.as_deref(),
+        Packed {
+            gradients: grads.as_deref(),
+            no_slip: None,
+        },
     )
     .unwrap();
     r
@@ -168,11 +171,9 @@ fn fourtakas_leaves_hydrostatic_water_at_rest() {
     }
 }
 
-/// A jittered lattice with ghosts, random densities and velocities: the terms'
-/// scalar and SIMD sums agree to round-off (relative 1e-12: the same pairs added in
-/// another order), and the energy rate is m_i (p_i/rho_i^2) D_i.
-#[test]
-fn every_instruction_set_sums_the_diffusion_terms_alike() {
+/// A jittered 12 x 12 lattice, its bottom row ghosts (of source 0), with random
+/// densities and velocities.
+fn jittered_world() -> hecs::World {
     let mut state = 12345u64;
     let mut next = move || {
         state = state
@@ -199,13 +200,22 @@ fn every_instruction_set_sums_the_diffusion_terms_alike() {
             };
         }
     }
+    world
+}
+
+/// A jittered lattice with ghosts, random densities and velocities: the terms'
+/// scalar and SIMD sums agree to round-off (relative 1e-12: the same pairs added in
+/// another order), and the energy rate is m_i (p_i/rho_i^2) D_i.
+#[test]
+fn every_instruction_set_sums_the_diffusion_terms_alike() {
+    let world = jittered_world();
     for diffusion in ["MolteniColagrossi", "Fourtakas", "DeltaSph"] {
         let text = format!(
             "[PressureGradient(), ArtificialViscosity(), {diffusion}(delta: 0.2), Continuity()]"
         );
         let specs: Vec<TermSpec> = sph_core::registry::ron_options().from_str(&text).unwrap();
         RateTerms::check(&specs).unwrap();
-        let terms = RateTerms::build(&specs, &constants());
+        let terms = RateTerms::build(&specs, &constants(), false);
         let r = packed(&world, terms.reads());
         let k = Wendland::new(H);
         let eom = EquationsOfMotion(terms);
@@ -220,7 +230,7 @@ fn every_instruction_set_sums_the_diffusion_terms_alike() {
             let plain: Vec<TermSpec> = sph_core::registry::ron_options()
                 .from_str("[PressureGradient(), ArtificialViscosity(), Continuity()]")
                 .unwrap();
-            let plain = EquationsOfMotion(RateTerms::build(&plain, &constants()));
+            let plain = EquationsOfMotion(RateTerms::build(&plain, &constants(), false));
             let without = Pass::with_isa(&plain, k, &r, Isa::SCALAR)
                 .unwrap()
                 .sum(i, &js);
@@ -299,5 +309,83 @@ fn delta_sph_vanishes_on_a_linear_field_also_at_the_surface() {
         let d = diffusion_of(DeltaSph::build(&p, &constants()), &world, i);
         let mc = diffusion_of(MolteniColagrossi::build(&p, &constants()), &world, i);
         assert!(d.abs() < 0.01 * mc, "row {row}: {d:e} against {mc:e}");
+    }
+}
+
+/// With walls that do not slip, the viscous terms read each ghost's no-slip velocity
+/// (`ShearVx`, `ShearVy`) and continuity its `Velocity`: on every instruction set the
+/// sums equal, to round-off, the plain terms' on the same lattice with the ghosts'
+/// velocities replaced by the no-slip ones (the viscous part), and on the lattice as
+/// it is (the density rate).
+#[test]
+fn viscous_terms_read_the_ghosts_no_slip_velocities_and_continuity_does_not() {
+    let world = jittered_world();
+    let ghosts = world.query::<&Ghost>().iter().count();
+    assert!(ghosts > 0);
+    let no_slip: Vec<DVec2> = (0..ghosts)
+        .map(|k| DVec2::new(0.3 - 0.05 * k as f64, 0.1 + 0.02 * k as f64))
+        .collect();
+    let mut swapped = jittered_world();
+    for ((_, v), ns) in swapped
+        .query_mut::<(&Ghost, &mut Velocity)>()
+        .into_iter()
+        .zip(&no_slip)
+    {
+        v.0 = *ns;
+    }
+    let k = Wendland::new(H);
+    for text in [
+        "[ArtificialViscosity(alpha: 0.1)]",
+        "[LaminarViscosity(nu: 0.001)]",
+        "[PressureGradient(), ArtificialViscosity(), LaminarViscosity(nu: 0.001), Continuity()]",
+    ] {
+        let specs: Vec<TermSpec> = sph_core::registry::ron_options().from_str(text).unwrap();
+        let shear = RateTerms::build(&specs, &constants(), true);
+        let plain = RateTerms::build(&specs, &constants(), false);
+        assert!(shear.reads().contains(Field::ShearVx) && !plain.reads().contains(Field::ShearVx));
+        let mut r = Records::default();
+        r.pack_with(
+            &Particles::of(&world).unwrap(),
+            shear.reads(),
+            &constants().eos,
+            Packed {
+                gradients: None,
+                no_slip: Some(&no_slip),
+            },
+        )
+        .unwrap();
+        let (on_swapped, on_world) = (
+            packed(&swapped, plain.reads()),
+            packed(&world, plain.reads()),
+        );
+        let (shear, plain) = (EquationsOfMotion(shear), EquationsOfMotion(plain));
+        for i in [11, 70, 100] {
+            let js = neighbours(&r, i, k.support());
+            // A fluid particle next to the ghost row sees the ghosts.
+            assert!(i != 11 || js.iter().any(|&j| j as usize >= r.len() - ghosts));
+            let viscous = Pass::with_isa(&plain, k, &on_swapped, Isa::SCALAR)
+                .unwrap()
+                .sum(i, &js);
+            let density = Pass::with_isa(&plain, k, &on_world, Isa::SCALAR)
+                .unwrap()
+                .sum(i, &js);
+            for isa in std::iter::once(Isa::SCALAR).chain(Isa::available()) {
+                let s = Pass::with_isa(&shear, k, &r, isa).unwrap().sum(i, &js);
+                let close = |a: f64, b: f64, scale: f64| (a - b).abs() <= 1e-12 * scale.max(1e-300);
+                let scale = viscous.acc.length();
+                assert!(
+                    close(s.acc.x, viscous.acc.x, scale)
+                        && close(s.acc.y, viscous.acc.y, scale)
+                        && close(s.drho, density.drho, density.drho.abs()),
+                    "{text} at {i} on {}: {s:?} against {viscous:?} / {density:?}",
+                    isa.name()
+                );
+            }
+            // The no-slip velocities matter here: the plain sum on the lattice as it
+            // is differs (near the ghosts).
+            if i == 11 {
+                assert!((density.acc - viscous.acc).length() > 1e-6 * viscous.acc.length());
+            }
+        }
     }
 }

@@ -13,6 +13,7 @@ use crate::components::{Density, Mass, Position, Pressure, Velocity};
 use crate::sim::Tait;
 use crate::stage::StepError;
 use crate::world::Particles;
+use glam::DVec2;
 use rayon::prelude::*;
 
 /// A particle quantity a pair term can read from the packed records.
@@ -40,11 +41,20 @@ pub enum Field {
     GradRhoX,
     /// The same, y.
     GradRhoY,
+    /// Velocity as the viscous terms see it, x [m/s]: a fluid particle's own; a ghost's
+    /// no-slip mirror with walls that do not slip ([`crate::vocab::NoSlipVelocities`]),
+    /// else its `Vx`. The kinematic terms (continuity, the pressure solves) read `Vx`,
+    /// whose ghosts always mirror the normal component only: a ghost whose tangential
+    /// velocity is reversed there adds a spurious divergence at the wall (Adami, Hu &
+    /// Adams 2012, sec. 2.3, use the no-slip velocity in the viscous term only).
+    ShearVx,
+    /// The same, y.
+    ShearVy,
 }
 
 impl Field {
     /// How many fields there are.
-    pub const COUNT: usize = 10;
+    pub const COUNT: usize = 12;
     /// Every field, in record order.
     pub const ALL: [Field; Field::COUNT] = [
         Field::X,
@@ -57,6 +67,8 @@ impl Field {
         Field::Sound,
         Field::GradRhoX,
         Field::GradRhoY,
+        Field::ShearVx,
+        Field::ShearVy,
     ];
     /// What the momentum equation's terms read: one 64-byte record.
     pub const MOMENTUM: [Field; 8] = [
@@ -79,6 +91,8 @@ impl Fields {
     /// What every pass packs: the geometry and the mass (the padding lanes of a group
     /// are a particle of zero mass).
     pub const GEOMETRY: Fields = Fields::of(&[Field::X, Field::Y, Field::Mass]);
+    /// The viscous terms' velocities with walls that do not slip.
+    pub const SHEAR: Fields = Fields::of(&[Field::ShearVx, Field::ShearVy]);
 
     /// The set of `list`.
     pub const fn of(list: &[Field]) -> Fields {
@@ -199,11 +213,9 @@ impl Records {
         assert!(i < self.len, "particle {i} of {} records", self.len);
         let record = &bytemuck_lines_ref(&self.lines)[i * self.stride..][..self.stride];
         let mut values = [0.0; Field::COUNT];
-        for k in 0..Field::COUNT {
-            if wanted[k] {
-                values[k] = record[offsets[k]];
-            }
-        }
+        each_field!(|k| if wanted[k] {
+            values[k] = record[offsets[k]];
+        });
         super::Me { values, index: i }
     }
 
@@ -245,23 +257,23 @@ impl Records {
         fields: Fields,
         eos: &Tait,
     ) -> Result<(), StepError> {
-        self.pack_with(particles, fields, eos, None)
+        self.pack_with(particles, fields, eos, Packed::default())
     }
 
-    /// [`Records::pack`], with the density gradients of every particle in the joint
-    /// numbering (needed when `fields` holds `GradRhoX` or `GradRhoY`).
+    /// [`Records::pack`], with the per-particle quantities that are not columns of
+    /// the world (see [`Packed`]).
     ///
     /// # Errors
     /// As [`Records::pack`]; the gradients are wanted but missing or not one per
-    /// particle.
+    /// particle; the no-slip velocities are not one per ghost.
     pub fn pack_with(
         &mut self,
         particles: &Particles,
         fields: Fields,
         eos: &Tait,
-        gradients: Option<&[glam::DVec2]>,
+        extra: Packed,
     ) -> Result<(), StepError> {
-        self.write(particles, fields, eos, gradients, true)
+        self.write(particles, fields, eos, extra, true)
     }
 
     /// Packs `changed` again into records that hold it, leaving the other fields as
@@ -279,7 +291,7 @@ impl Records {
         changed: Fields,
         eos: &Tait,
     ) -> Result<(), StepError> {
-        self.write(particles, changed, eos, None, false)
+        self.write(particles, changed, eos, Packed::default(), false)
     }
 
     /// Writes `fields` of every particle: into a fresh layout for them (`reshape`), or
@@ -289,9 +301,10 @@ impl Records {
         particles: &Particles,
         fields: Fields,
         eos: &Tait,
-        gradients: Option<&[glam::DVec2]>,
+        extra: Packed,
         reshape: bool,
     ) -> Result<(), StepError> {
+        let gradients = extra.gradients;
         let (x, rho, m) = (
             particles.joined::<Position>()?,
             particles.joined::<Density>()?,
@@ -309,6 +322,26 @@ impl Records {
         };
         let (v, p) = (v.as_ref().map(|c| c.view()), p.as_ref().map(|c| c.view()));
         let len = x.len();
+        // The viscous terms' velocities: the fluid's own, the ghosts' no-slip mirrors
+        // when the walls have them, else the ghosts' `Velocity`.
+        let shear_wanted = wants(&[Field::ShearVx, Field::ShearVy]);
+        let shear_v = match shear_wanted {
+            true => Some(particles.joined::<Velocity>()?),
+            false => None,
+        };
+        let shear_v = shear_v.as_ref().map(|c| c.view());
+        let n_fluid = x.fluid.len();
+        let no_slip = match (shear_wanted, extra.no_slip) {
+            (true, Some(ns)) if ns.len() != len - n_fluid => {
+                return Err(StepError::Internal(format!(
+                    "{} no-slip velocities for {} ghosts: they were mirrored for another state",
+                    ns.len(),
+                    len - n_fluid
+                )))
+            }
+            (true, ns) => ns,
+            (false, _) => None,
+        };
         let grad = match wants(&[Field::GradRhoX, Field::GradRhoY]) {
             false => None,
             true => match gradients {
@@ -380,10 +413,30 @@ impl Records {
                         put(Field::GradRhoX, g[j as usize].x);
                         put(Field::GradRhoY, g[j as usize].y);
                     }
+                    if let Some(v) = &shear_v {
+                        let vj = match no_slip {
+                            Some(ns) if j as usize >= n_fluid => ns[j as usize - n_fluid],
+                            _ => v.get(j).0,
+                        };
+                        put(Field::ShearVx, vj.x);
+                        put(Field::ShearVy, vj.y);
+                    }
                 }
             });
         Ok(())
     }
+}
+
+/// What [`Records::pack_with`] packs besides the world's columns, each in the joint
+/// numbering's order.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Packed<'a> {
+    /// The density gradient of every particle (fluid, then ghosts), for `GradRhoX`
+    /// and `GradRhoY`.
+    pub gradients: Option<&'a [DVec2]>,
+    /// Every ghost's no-slip velocity, for `ShearVx` and `ShearVy`
+    /// ([`crate::vocab::NoSlipVelocities`]); None: the ghosts' `Velocity`.
+    pub no_slip: Option<&'a [DVec2]>,
 }
 
 /// The lines as one slice of f64s.
