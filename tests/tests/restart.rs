@@ -122,6 +122,21 @@ fn same_files_then_clean(a: PathBuf, b: PathBuf, files: &[&str]) {
     }
 }
 
+/// With walls that do not slip too: the ghosts' no-slip velocities are mirrored
+/// afresh every step, so a resumed run needs nothing more in the checkpoint.
+#[test]
+fn a_resumed_no_slip_dfsph_run_is_bit_identical() {
+    let no_slip = || {
+        let mut overrides = DFSPH_COARSE.to_vec();
+        overrides.push("pipeline.ghost_walls.slip=NoSlip");
+        load(DAM_BREAK_DFSPH, "scenarios/dam_break_dfsph.ron", &overrides)
+    };
+    let full = uninterrupted(no_slip(), "restart-dfsph-no-slip-full");
+    let part = stopped(no_slip(), "restart-dfsph-no-slip-part", Some(0.1), 0.35);
+    resume(no_slip(), &part, 1);
+    same_files_then_clean(full, part, &["probes.csv", "density_solve.csv"]);
+}
+
 /// The DFSPH pipeline keeps its warm start in the checkpointed pressures, and the
 /// solves' reports continue: resumed, it writes what an uninterrupted run writes,
 /// the solves' iterations and errors included.

@@ -49,6 +49,14 @@ shipped! {
         ["resolution=Spacing(0.05)", "end_time=0.3"];
     sloshing_dfsph_is_deterministic: "sloshing_dfsph.ron",
         ["resolution=ParticlesAcross(60)", "end_time=0.6", "tank.motion.ramp=0.1"];
+    // Walls that do not slip: the ghosts' no-slip velocities (a resource carried
+    // through the solves), on fixed and on rolling walls.
+    dam_break_dfsph_no_slip_is_deterministic: "dam_break_dfsph.ron",
+        ["resolution=ParticlesAcross(40)", "end_time=0.6", "pipeline.ghost_walls.slip=NoSlip"];
+    sloshing_dfsph_no_slip_is_deterministic: "sloshing_dfsph.ron",
+        ["resolution=ParticlesAcross(60)", "end_time=0.6", "tank.motion.ramp=0.1", "pipeline.ghost_walls.slip=NoSlip"];
+    dam_break_no_slip_is_deterministic: "dam_break.ron",
+        ["resolution=ParticlesAcross(40)", "end_time=0.3", "pipeline.ghost_walls.slip=NoSlip"];
     sloshing_is_deterministic: "sloshing.ron",
         ["resolution=ParticlesAcross(60)", "end_time=0.4", "tank.motion.ramp=0.1"];
     sloshing_paper_is_deterministic: "sloshing_paper.ron",
