@@ -231,6 +231,7 @@ impl Stage for DensitySolve {
             .reads::<Neighbours>()
             .reads::<DfsphFactors>()
             .reads::<GhostReflections>()
+            .uses::<NoSlipVelocities>()
             .reads::<Position>()
             .reads::<Mass>()
             .updates::<Density>()

@@ -14,7 +14,9 @@ use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure, Velo
 use sph_core::contract::Access;
 use sph_core::sim::{Clock, Sim};
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{require_neighbours, DfsphFactors, GhostReflections, Neighbours};
+use sph_core::vocab::{
+    require_neighbours, DfsphFactors, GhostReflections, Neighbours, NoSlipVelocities,
+};
 use sph_core::world::{archetype, column_mut};
 use sph_core::StageRegistry;
 
@@ -131,6 +133,7 @@ impl Stage for DivergenceSolve {
             .reads::<Neighbours>()
             .reads::<DfsphFactors>()
             .reads::<GhostReflections>()
+            .uses::<NoSlipVelocities>()
             .reads::<Position>()
             .reads::<Mass>()
             .reads::<Density>()

@@ -13,7 +13,7 @@ use sph_core::contract::Access;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{
-    require_neighbours, ArtificialViscosity, DensityGradients, DiffusionPower, GhostSettings,
+    require_neighbours, ArtificialViscosity, DensityGradients, DiffusionPower,
     NeighbourCountsInPass, Neighbours, NoSlipVelocities, ViscousDissipation, WallPower,
 };
 use sph_core::world::{archetype, ensure_component};
@@ -50,6 +50,7 @@ pub fn register(registry: &mut StageRegistry) {
                 params: p,
                 terms: RateTerms::default(),
                 chunk_power: Vec::new(),
+                wall_shear: false,
                 counts: false,
             })
         },
@@ -61,6 +62,8 @@ pub struct Forces {
     terms: RateTerms,
     /// The energy rates of each chunk of particles, kept between steps.
     chunk_power: Vec<rates::Power>,
+    /// The viscous terms read the ghosts' no-slip velocities (`NoSlipVelocities`).
+    wall_shear: bool,
     /// The fluid has a `NeighbourCount` column, which this pass fills in while the
     /// lists have a skin (`vocab::NeighbourCountsInPass`).
     counts: bool,
@@ -73,11 +76,9 @@ impl Stage for Forces {
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         require_neighbours(sim, "forces")?;
-        let no_slip = sim
-            .resources
-            .get::<GhostSettings>()
-            .is_some_and(|g| g.no_slip);
+        let no_slip = sim.resources.contains::<NoSlipVelocities>();
         self.terms = RateTerms::build(&self.params.terms, &sim.constants, no_slip);
+        self.wall_shear = no_slip;
         ensure_component::<Fluid, Acceleration>(sim);
         if self.terms.continuity.is_some() {
             ensure_component::<Fluid, DensityRate>(sim);
@@ -91,6 +92,13 @@ impl Stage for Forces {
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
         let _span = tracing::trace_span!("pair_sums").entered();
+        // Ghost walls set up after this stage (a pipeline that lists them later) are
+        // known only now.
+        let no_slip = sim.resources.contains::<NoSlipVelocities>();
+        if no_slip != self.wall_shear {
+            self.terms = RateTerms::build(&self.params.terms, &sim.constants, no_slip);
+            self.wall_shear = no_slip;
+        }
         // The walls' work on the fluid, for the energy budget: in the same pass when
         // the terms include continuity, else a pass over the ghost neighbours only
         // (stages/src/wall_work.rs).
@@ -153,7 +161,6 @@ impl Stage for Forces {
             .writes::<DiffusionPower>()
             .writes::<WallPower>()
             .uses::<NeighbourCount>()
-            .uses::<GhostSettings>()
             .uses::<NoSlipVelocities>();
         match viscosity {
             Some(v) => access.exposes(v),

@@ -131,12 +131,10 @@ impl Stage for GhostWalls {
                 "the scenario has no walls; remove GhostWalls() or add a `tank` or `walls`",
             ));
         }
-        let no_slip = self.params.slip == Slip::NoSlip;
         sim.resources.insert(GhostSettings {
             hydrostatic: self.params.hydrostatic,
-            no_slip,
         });
-        if no_slip {
+        if self.params.slip == Slip::NoSlip {
             sim.resources.insert(NoSlipVelocities::default());
         }
         Ok(())
@@ -369,16 +367,22 @@ impl GhostWalls {
                 rho.0 = ghost_density(fr[s].0, fx[s].0, pos, correction.map(|c| (c, body)));
             });
         if let Some(ns) = no_slip {
-            ns.par_iter_mut().zip(images).for_each(|(out, img)| {
-                let s = img.source as usize;
-                let (mut pos, mut vel) = (fx[s].0, fv[s].0);
-                for k in std::iter::once(img.first).chain(img.second) {
-                    let k = k as usize;
-                    vel = mirror_velocity(&lines[k], &walls[k], pos, vel, Slip::NoSlip);
-                    pos = lines[k].mirror(pos);
-                }
-                *out = vel;
-            });
+            // The source from the ghost column: a particle sort renumbers it there
+            // (`sort_particles`), not in `images`, while the ghosts are kept.
+            let sources: &[Ghost] = &gs;
+            ns.par_iter_mut()
+                .zip(sources)
+                .zip(images)
+                .for_each(|((out, g), img)| {
+                    let s = g.source as usize;
+                    let (mut pos, mut vel) = (fx[s].0, fv[s].0);
+                    for k in std::iter::once(img.first).chain(img.second) {
+                        let k = k as usize;
+                        vel = mirror_velocity(&lines[k], &walls[k], pos, vel, Slip::NoSlip);
+                        pos = lines[k].mirror(pos);
+                    }
+                    *out = vel;
+                });
         }
         Ok(())
     }

@@ -135,8 +135,9 @@ impl Jacobi {
         sim.resources.insert(factors);
         let outcome = solved?;
         // The ghosts' no-slip velocities follow their sources' change too.
-        let (base, acc) = (&self.base, &self.acc);
-        if acc.len() == base.len() {
+        // (`acc` is empty when the solve found no fluid.)
+        let acc = &self.acc;
+        if !acc.is_empty() {
             shift_no_slip(sim, |s| dt * acc[s])?;
         }
         Ok(outcome)
@@ -155,6 +156,7 @@ impl Jacobi {
         alpha: &[f64],
         offsets: &[f64],
     ) -> Result<Outcome, StepError> {
+        self.acc.clear();
         let Some(fluid) = archetype::<Fluid>(&sim.world) else {
             return Ok(Outcome::default());
         };

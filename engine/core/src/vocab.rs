@@ -408,8 +408,6 @@ pub struct ContinuityInPipeline;
 pub struct GhostSettings {
     /// The hydrostatic correction is on.
     pub hydrostatic: bool,
-    /// The walls do not slip: the viscous terms read the ghosts' [`NoSlipVelocities`].
-    pub no_slip: bool,
 }
 
 /// Ghost density: the source's, or with the hydrostatic correction the density whose
