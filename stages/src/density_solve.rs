@@ -192,9 +192,10 @@ impl Stage for DensitySolve {
                     .for_each(|(k, v)| v.0 += dt * mirror.apply(k, a[source[k].source as usize].0));
             }
         }
-        if sim.resources.contains::<NoSlipVelocities>() {
-            let a: Vec<DVec2> = column::<Acceleration>(fluid)?.iter().map(|a| a.0).collect();
-            crate::pressure_solve::shift_no_slip(sim, |s| dt * a[s])?;
+        if let Some(ns) = sim.resources.get_mut::<NoSlipVelocities>() {
+            let a = column::<Acceleration>(fluid)?;
+            let a: &[Acceleration] = &a;
+            crate::pressure_solve::shift_no_slip(&sim.world, ns, |s| dt * a[s].0)?;
         }
         let solved = self
             .jacobi

@@ -137,8 +137,8 @@ impl Jacobi {
         // The ghosts' no-slip velocities follow their sources' change too.
         // (`acc` is empty when the solve found no fluid.)
         let acc = &self.acc;
-        if !acc.is_empty() {
-            shift_no_slip(sim, |s| dt * acc[s])?;
+        if let (false, Some(ns)) = (acc.is_empty(), sim.resources.get_mut::<NoSlipVelocities>()) {
+            shift_no_slip(&sim.world, ns, |s| dt * acc[s])?;
         }
         Ok(outcome)
     }
@@ -317,36 +317,31 @@ fn residual(target: Target, dt: f64, rho0: f64, rho: f64, rate: f64) -> f64 {
     }
 }
 
-/// Changes every ghost's no-slip velocity (`NoSlipVelocities`, when the walls do not
-/// slip) by the mirror of its source's velocity change `dv(source)`.
+/// Changes every ghost's no-slip velocity `ns` by the mirror of its source's velocity
+/// change `dv(source)`; the ghosts are `world`'s.
 pub(crate) fn shift_no_slip(
-    sim: &mut Sim,
+    world: &hecs::World,
+    ns: &mut NoSlipVelocities,
     dv: impl Fn(usize) -> DVec2 + Sync,
 ) -> Result<(), StepError> {
-    let Some(ghost) = archetype::<Ghost>(&sim.world) else {
-        return Ok(());
-    };
-    let Some(mut ns) = sim.resources.take::<NoSlipVelocities>() else {
+    let Some(ghost) = archetype::<Ghost>(world) else {
         return Ok(());
     };
     let source = column::<Ghost>(ghost)?;
     let source: &[Ghost] = &source;
-    let result = if ns.velocity.len() != source.len() || ns.sign.len() != source.len() {
-        Err(StepError::Internal(format!(
+    if ns.velocity.len() != source.len() || ns.sign.len() != source.len() {
+        return Err(StepError::Internal(format!(
             "{} ghosts but {} no-slip velocities: GhostWalls must run before the solves",
             source.len(),
             ns.velocity.len()
-        )))
-    } else {
-        let sign = &ns.sign;
-        ns.velocity
-            .par_iter_mut()
-            .enumerate()
-            .for_each(|(k, v)| *v += sign[k] * dv(source[k].source as usize));
-        Ok(())
-    };
-    sim.resources.insert(ns);
-    result
+        )));
+    }
+    let sign = &ns.sign;
+    ns.velocity
+        .par_iter_mut()
+        .enumerate()
+        .for_each(|(k, v)| *v += sign[k] * dv(source[k].source as usize));
+    Ok(())
 }
 
 /// Sets every ghost's pressure to its source's plus its carry, at least 0.

@@ -78,10 +78,7 @@ impl RateTerm for ArtificialViscosity {
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
         let c = L::splat;
-        let (wx, wy) = match self.shear {
-            true => p.shear_v_ij(me),
-            false => p.v_ij(me),
-        };
+        let (wx, wy) = p.viscous_v_ij(me, self.shear);
         let vx = wx * p.dx + wy * p.dy;
         let d = p.r * p.r + c(self.eta2);
         let cbar = c(0.5) * (me.lanes::<L>(Field::Sound) + p.j(Field::Sound));

@@ -63,10 +63,7 @@ impl RateTerm for LaminarViscosity {
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
         let c = L::splat;
-        let (wx, wy) = match self.shear {
-            true => p.shear_v_ij(me),
-            false => p.v_ij(me),
-        };
+        let (wx, wy) = p.viscous_v_ij(me, self.shear);
         let x_grad = p.dx * p.gx + p.dy * p.gy;
         let rho_ij = me.lanes::<L>(Field::Rho) * p.j(Field::Rho);
         let k = c(self.mu_sum) * x_grad / (rho_ij * (p.r * p.r + c(self.eta2)));

@@ -172,15 +172,18 @@ impl<L: Lane> Pair<L> {
         )
     }
 
-    /// v_ij as the viscous terms see it: j's `ShearVx`/`ShearVy` (a ghost's no-slip
-    /// mirror with walls that do not slip) against i's own velocity (the term must
-    /// read `Vx`, `Vy`, `ShearVx` and `ShearVy`).
+    /// v_ij as a viscous term sees it: with `wall_shear`, j's `ShearVx`/`ShearVy` (a
+    /// ghost's no-slip mirror with walls that do not slip) against i's own velocity
+    /// (the term must then read them too), else [`Pair::v_ij`].
     #[inline(always)]
-    pub fn shear_v_ij(&self, me: &Me) -> (L, L) {
-        (
-            me.lanes::<L>(Field::Vx) - self.j(Field::ShearVx),
-            me.lanes::<L>(Field::Vy) - self.j(Field::ShearVy),
-        )
+    pub fn viscous_v_ij(&self, me: &Me, wall_shear: bool) -> (L, L) {
+        match wall_shear {
+            true => (
+                me.lanes::<L>(Field::Vx) - self.j(Field::ShearVx),
+                me.lanes::<L>(Field::Vy) - self.j(Field::ShearVy),
+            ),
+            false => self.v_ij(me),
+        }
     }
 }
 

@@ -312,7 +312,8 @@ impl Records {
         );
         let (x, rho, m) = (x.view(), rho.view(), m.view());
         let wants = |f: &[Field]| f.iter().any(|&f| fields.contains(f));
-        let v = match wants(&[Field::Vx, Field::Vy]) {
+        // Velocities: a field of their own, and the viscous terms' for the fluid.
+        let v = match wants(&[Field::Vx, Field::Vy, Field::ShearVx, Field::ShearVy]) {
             true => Some(particles.joined::<Velocity>()?),
             false => None,
         };
@@ -325,11 +326,6 @@ impl Records {
         // The viscous terms' velocities: the fluid's own, the ghosts' no-slip mirrors
         // when the walls have them, else the ghosts' `Velocity`.
         let shear_wanted = wants(&[Field::ShearVx, Field::ShearVy]);
-        let shear_v = match shear_wanted {
-            true => Some(particles.joined::<Velocity>()?),
-            false => None,
-        };
-        let shear_v = shear_v.as_ref().map(|c| c.view());
         let n_fluid = x.fluid.len();
         let no_slip = match (shear_wanted, extra.no_slip) {
             (true, Some(ns)) if ns.len() != len - n_fluid => {
@@ -402,6 +398,14 @@ impl Records {
                         let vj = v.get(j).0;
                         put(Field::Vx, vj.x);
                         put(Field::Vy, vj.y);
+                        if shear_wanted {
+                            let vs = match no_slip {
+                                Some(ns) if j as usize >= n_fluid => ns[j as usize - n_fluid],
+                                _ => vj,
+                            };
+                            put(Field::ShearVx, vs.x);
+                            put(Field::ShearVy, vs.y);
+                        }
                     }
                     if let Some(p) = &p {
                         put(Field::PRho2, p.get(j).0 / (rhoj * rhoj));
@@ -412,14 +416,6 @@ impl Records {
                     if let Some(g) = grad {
                         put(Field::GradRhoX, g[j as usize].x);
                         put(Field::GradRhoY, g[j as usize].y);
-                    }
-                    if let Some(v) = &shear_v {
-                        let vj = match no_slip {
-                            Some(ns) if j as usize >= n_fluid => ns[j as usize - n_fluid],
-                            _ => v.get(j).0,
-                        };
-                        put(Field::ShearVx, vj.x);
-                        put(Field::ShearVy, vj.y);
                     }
                 }
             });
