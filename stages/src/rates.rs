@@ -97,7 +97,11 @@ pub(crate) fn run(
     const WAVES_F: u16 = WAVES | bits(&[Fourtakas]);
     const SPLASH_D: u16 = SPLASH | bits(&[DeltaSph]);
     const WAVES_D: u16 = WAVES | bits(&[DeltaSph]);
+    // Riemann-solver SPH (the dam break's and the sloshing tank's).
+    const RIEMANN: u16 = bits(&[RiemannPressure, Continuity, RiemannDiffusion]);
     if let Some(set) = Fixed::<SPLASH>::of(terms) {
+        run_set(sim, set, out, chunk_power)
+    } else if let Some(set) = Fixed::<RIEMANN>::of(terms) {
         run_set(sim, set, out, chunk_power)
     } else if let Some(set) = Fixed::<SPLASH_F>::of(terms) {
         run_set(sim, set, out, chunk_power)

@@ -19,6 +19,9 @@ pub mod laminar_viscosity;
 pub mod mls;
 pub mod molteni_colagrossi;
 pub mod pressure_gradient;
+pub mod riemann;
+pub mod riemann_diffusion;
+pub mod riemann_pressure;
 pub mod shepard;
 
 use serde::de::DeserializeOwned;
@@ -223,6 +226,8 @@ rate_terms! {
     molteni_colagrossi::MolteniColagrossi,
     fourtakas::Fourtakas,
     delta_sph::DeltaSph,
+    riemann_pressure::RiemannPressure,
+    riemann_diffusion::RiemannDiffusion,
 }
 
 #[cfg(test)]

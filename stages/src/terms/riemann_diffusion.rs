@@ -1,0 +1,81 @@
+//! The dissipation that Riemann-solver SPH adds to the continuity equation (Zhang, Hu
+//! & Adams 2017, eqs. 11, 13 and 17; docs/physics.md, "Riemann-solver SPH"). The
+//! interface velocity of a pair's Riemann problem differs from the pair's mean by
+//! e_ij (p_i - p_j) / (2 rhobar cbar) (the limiter acts on the momentum equation
+//! only), and the continuity equation 2 rho_i sum_j V_j (v_i - v*_ij) . grad_i W_ij
+//! thereby gains a pressure-driven diffusion of density,
+//!   D_i = sum_j rho_i V_j (p_i - p_j)^D / (rhobar_ij cbar_ij) (x_ij . grad_i W_ij) / r_ij,
+//! which runs from the particle of higher pressure to the lower (x_ij . grad_i W_ij < 0).
+//! With `remove_hydrostatic` (the default) the hydrostatic pressure difference
+//! rho_0 g . x_ji is taken out of p_i - p_j, as Fourtakas et al. (2019) take it out of
+//! the density difference, so that water at rest under a free surface stays at rest;
+//! without it the term is the paper's. The mean part of the paper's continuity
+//! equation is `Continuity()`'s sum_j m_j v_ij . grad_i W_ij (the paper's
+//! 2 rho_i / (rho_i + rho_j) weight differs from 1 by |rho_i - rho_j| / (2 rho), below
+//! 1 % in weakly compressible flow).
+
+use super::riemann::states;
+use super::Term;
+use serde::{Deserialize, Serialize};
+use sph_core::pair::{Field, Fields, Lane, Me, Pair, RateTerm, Rates};
+use sph_core::sim::Constants;
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Params {
+    /// Take the hydrostatic part rho_0 g . x_ji out of the pressure difference.
+    /// Default true; false is the paper's term.
+    pub remove_hydrostatic: bool,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Self {
+            remove_hydrostatic: true,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RiemannDiffusion {
+    /// rho_0 g, or 0 without the hydrostatic correction [kg/m^2/s^2].
+    rho_gx: f64,
+    rho_gy: f64,
+    /// See `RiemannPressure::tiny`.
+    tiny: f64,
+}
+
+impl Term for RiemannDiffusion {
+    const READS: Fields = Fields::of(&[Field::Rho, Field::PRho2, Field::Sound]);
+    const DIFFUSION: bool = true;
+    type Params = Params;
+    fn build(p: &Params, c: &Constants) -> Self {
+        let s = if p.remove_hydrostatic {
+            c.eos.rho0
+        } else {
+            0.0
+        };
+        Self {
+            rho_gx: s * c.gravity.x,
+            rho_gy: s * c.gravity.y,
+            tiny: 1e-9 * c.h,
+        }
+    }
+}
+
+impl RateTerm for RiemannDiffusion {
+    fn reads(&self) -> Fields {
+        <Self as Term>::READS
+    }
+    #[inline(always)]
+    fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
+        let c = L::splat;
+        let s = states(me, p);
+        // (p_i - p_j) less its hydrostatic part p_i - p_j = -rho_0 g . x_ji = rho_0 g . x_ij.
+        let dp = s.p_i - s.p_j - (c(self.rho_gx) * p.dx + c(self.rho_gy) * p.dy);
+        let x_grad = p.dx * p.gx + p.dy * p.gy;
+        r.diffusion = r.diffusion
+            + s.rho_i * p.j(Field::Mass) * dp * x_grad
+                / (s.rho_j * s.rhobar * s.cbar * p.r.max(c(self.tiny)));
+    }
+}
