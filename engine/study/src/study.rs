@@ -220,6 +220,21 @@ pub enum Metric {
         #[serde(default)]
         from: f64,
     },
+    /// Impact peaks against a measured band: the largest reading of each whole roll
+    /// period from `from` [s] is impact k = 1, 2, ..., set against row k of `reference`
+    /// (the Test 10 peak statistics: peak, mean, std, median, min, max, cv, band low,
+    /// band high, pressures in mbar). Per impact `<c>_impact<k>` [Pa] and
+    /// `<c>_impact<k>_band` (its [`metrics::band_distance`] from mean +- 2 std); over
+    /// them `<c>_band_error` (the mean |distance|: 0 when every impact is inside),
+    /// `<c>_impacts_median_2_4` [Pa] (the median of impacts 2-4) and
+    /// `<c>_above_measured_max` (how many impacts exceed the largest peak measured in
+    /// any repetition of their row).
+    ImpactBand {
+        column: String,
+        reference: String,
+        #[serde(default)]
+        from: f64,
+    },
     /// (E(0) - E(t))/E(0) of E = kinetic + potential (energy.csv) at each time:
     /// `energy_loss_t<t>`.
     EnergyLoss { times: Vec<f64> },
@@ -1133,6 +1148,51 @@ fn metric_values(
                 (format!("{b}_peak_median"), median),
                 (format!("{b}_peak_max"), max),
             ]
+        }
+        Metric::ImpactBand {
+            column,
+            reference,
+            from,
+        } => {
+            let (period, _) = roll(scenario);
+            let peaks = metrics::period_peak_list(&probes(column), period, *from);
+            let rows = crate::series::read_table(&study.resolve(reference))
+                .map(|(_, rows)| rows)
+                .unwrap_or_default();
+            let b = base(column);
+            let mut out = Vec::new();
+            let (mut sum, mut above) = (0.0, 0.0);
+            // 1 mbar = 100 Pa; a row without its nine columns gives NaNs.
+            let cell = |r: &[f64], k: usize| r.get(k).map_or(f64::NAN, |v| 100.0 * v);
+            for (k, row) in rows.iter().enumerate() {
+                let p = peaks.get(k).copied().unwrap_or(f64::NAN);
+                let d = metrics::band_distance(p, cell(row, 7), cell(row, 8));
+                sum += d.abs();
+                // A NaN peak or maximum counts as above: it is no measured impact.
+                let within = matches!(
+                    p.partial_cmp(&cell(row, 5)),
+                    Some(std::cmp::Ordering::Less | std::cmp::Ordering::Equal)
+                );
+                above += f64::from(!within);
+                out.push((format!("{b}_impact{}", k + 1), p));
+                out.push((format!("{b}_impact{}_band", k + 1), d));
+            }
+            let mut later: Vec<f64> = peaks.iter().skip(1).take(3).copied().collect();
+            let median = match later.len() {
+                3 if later.iter().all(|p| p.is_finite()) => {
+                    later.sort_by(f64::total_cmp);
+                    later[1]
+                }
+                _ => f64::NAN,
+            };
+            let error = match rows.len() {
+                0 => f64::NAN,
+                n => sum / n as f64,
+            };
+            out.push((format!("{b}_band_error"), error));
+            out.push((format!("{b}_impacts_median_2_4"), median));
+            out.push((format!("{b}_above_measured_max"), above));
+            out
         }
         Metric::EnergyLoss { times } => {
             let e = read_series(&dir.join("energy.csv"), "kinetic+potential").unwrap_or_default();

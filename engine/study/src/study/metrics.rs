@@ -237,17 +237,16 @@ pub fn forced_harmonic(
 }
 
 /// The largest sample in each whole period [from + k T, from + (k + 1) T) to the
-/// series' end, as (median, maximum) of those per-period peaks: the statistics of
-/// impacts that recur once per forcing period. NaNs if less than one whole period.
-pub fn period_peaks(series: &[(f64, f64)], period: f64, from: f64) -> (f64, f64) {
+/// series' end, in time order (NaN for a period holding a NaN sample: f64::max would
+/// drop it). Empty if less than one whole period.
+pub fn period_peak_list(series: &[(f64, f64)], period: f64, from: f64) -> Vec<f64> {
     let Some((n, _)) = whole_periods_end(series, from, period) else {
-        return (f64::NAN, f64::NAN);
+        return Vec::new();
     };
-    let mut peaks: Vec<f64> = (0..n)
+    (0..n)
         .map(|k| {
             let lo = from + k as f64 * period;
             let inside = series.iter().filter(|p| p.0 >= lo && p.0 < lo + period);
-            // f64::max would drop a NaN sample; a period holding one has no peak.
             inside.fold(f64::NEG_INFINITY, |m, p| {
                 if m.is_nan() || p.1.is_nan() {
                     f64::NAN
@@ -256,8 +255,16 @@ pub fn period_peaks(series: &[(f64, f64)], period: f64, from: f64) -> (f64, f64)
                 }
             })
         })
-        .collect();
-    if peaks.iter().any(|p| !p.is_finite()) {
+        .collect()
+}
+
+/// The per-period peaks of [`period_peak_list`] as (median, maximum): the statistics
+/// of impacts that recur once per forcing period. NaNs if less than one whole period
+/// or if a period holds a NaN.
+pub fn period_peaks(series: &[(f64, f64)], period: f64, from: f64) -> (f64, f64) {
+    let mut peaks = period_peak_list(series, period, from);
+    let n = peaks.len();
+    if n == 0 || peaks.iter().any(|p| !p.is_finite()) {
         return (f64::NAN, f64::NAN);
     }
     peaks.sort_by(f64::total_cmp);
@@ -267,6 +274,21 @@ pub fn period_peaks(series: &[(f64, f64)], period: f64, from: f64) -> (f64, f64)
         0.5 * (peaks[n / 2 - 1] + peaks[n / 2])
     };
     (median, peaks[n - 1])
+}
+
+/// How far a value lies outside the band [lo, hi], relative to the edge it passed:
+/// (v - hi)/hi above, (v - lo)/lo below (negative), 0 inside; NaN for a NaN value or
+/// band.
+pub fn band_distance(v: f64, lo: f64, hi: f64) -> f64 {
+    if v.is_nan() || lo.is_nan() || hi.is_nan() {
+        f64::NAN
+    } else if v > hi {
+        (v - hi) / hi
+    } else if v < lo {
+        (v - lo) / lo
+    } else {
+        0.0
+    }
 }
 
 /// Indices of the Pareto-optimal points (x, y), both to be minimised: no other point
@@ -471,5 +493,32 @@ mod tests {
         bad[3000].1 = f64::NAN;
         assert!(period_peaks(&bad, 2.0, 1.0).0.is_nan());
         assert!(period_peaks(&s, 2.0, 9.5).0.is_nan());
+    }
+
+    #[test]
+    fn period_peak_list_keeps_the_order_and_band_distance_is_relative_to_the_edge() {
+        let heights = [5.0, 1.0, 9.0, 3.0];
+        let s = sampled(
+            |t| {
+                let k = ((t - 1.0) / 2.0).floor();
+                let near = t >= 1.0 && (t - 1.0 - 2.0 * k - 0.5).abs() < 0.01;
+                if near && (k as usize) < heights.len() {
+                    heights[k as usize]
+                } else {
+                    0.0
+                }
+            },
+            9.0,
+            9000,
+        );
+        assert_eq!(period_peak_list(&s, 2.0, 1.0), heights.to_vec());
+        assert!(period_peak_list(&s, 2.0, 8.5).is_empty());
+        // The band 2-4: inside reads 0, above (v - 4)/4, below (v - 2)/2.
+        assert_eq!(band_distance(3.0, 2.0, 4.0), 0.0);
+        assert_eq!(band_distance(4.0, 2.0, 4.0), 0.0);
+        assert_eq!(band_distance(6.0, 2.0, 4.0), 0.5);
+        assert_eq!(band_distance(1.0, 2.0, 4.0), -0.5);
+        assert!(band_distance(f64::NAN, 2.0, 4.0).is_nan());
+        assert!(band_distance(3.0, f64::NAN, 4.0).is_nan());
     }
 }
