@@ -831,7 +831,12 @@ fn averaged(
 ) -> f64 {
     let reach = 1.5 * sim.constants.h;
     let centre = s.along;
-    let (lo, hi) = (centre - 0.5 * s.width, centre + 0.5 * s.width);
+    // A face cannot reach past the wall's ends: near a corner it is narrowed about its
+    // centre to fit (else the fluid-less part past the corner moves the face's mean
+    // pressure off the sensor's height: -1.1 % at 0.5 ds above a still floor).
+    let fit = (0.5 * s.width).min(centre).min(wall.length() - centre);
+    let half = if fit > 0.0 { fit } else { 0.5 * s.width };
+    let (lo, hi) = (centre - half, centre + half);
     let sample = |i: usize| {
         let q = x[i].0;
         let (d, a) = (wall.distance(q), wall.abscissa(q));

@@ -38,7 +38,8 @@ pub struct Stability {
     /// Largest |total - total(first sample)| over `energy_scale`, total = kinetic +
     /// potential + internal + dissipated by viscosity (energy.csv `total`).
     pub total_drift: f64,
-    /// Largest speed over the probe samples [m/s] (`max_speed`; 0 if not probed).
+    /// Largest speed over the probe samples [m/s] (`max_speed`; infinite if not probed,
+    /// so that a finite bound on it fails).
     pub max_speed: f64,
     /// At the end: fluid particles behind a wall or past a corner, or outside the domain.
     pub outside: usize,
@@ -167,7 +168,9 @@ impl Stability {
         // NaN-propagating: a NaN sample makes the measure NaN (then infinite, below).
         let max = |s: &[(f64, f64)]| s.iter().map(|p| p.1).fold(0.0, nan_max);
         self.density_fluctuation = nan_max(max(&rho), max(&guarded));
-        self.max_speed = column(&probes, "max_speed").map_or(0.0, |s| max(&s));
+        // A missing column is no measurement: NaN, so unbounded below (a finite bound on
+        // it fails, naming the speed, rather than passing on a zero).
+        self.max_speed = column(&probes, "max_speed").map_or(f64::NAN, |s| max(&s));
         self.time = total.last().map_or(0.0, |p| p.0);
         let mechanical: Vec<f64> = kinetic
             .iter()
@@ -294,6 +297,11 @@ mod tests {
 
     /// A run's outputs with a NaN in one probe or energy sample among finite ones.
     fn with_nan_in(file: &str, column: usize) -> Stability {
+        with_outputs(file, column, true)
+    }
+
+    /// The same, with or without the `max_speed` column in probes.csv.
+    fn with_outputs(file: &str, column: usize, speed: bool) -> Stability {
         let out = temp_out("stability-nan");
         std::fs::create_dir_all(&out).unwrap();
         let mut energy = vec![
@@ -319,6 +327,13 @@ mod tests {
             rows[2] = cells.join(",");
         }
         std::fs::write(out.join("energy.csv"), energy.join("\n") + "\n").unwrap();
+        if !speed {
+            for row in &mut probes {
+                *row = row
+                    .rsplit_once(',')
+                    .map_or(row.clone(), |r| r.0.to_string());
+            }
+        }
         std::fs::write(out.join("probes.csv"), probes.join("\n") + "\n").unwrap();
         let mut s = Stability {
             outcome: Outcome::Finished,
@@ -371,5 +386,26 @@ mod tests {
                 "{file} column {column}: {message}"
             );
         }
+    }
+
+    /// A probes.csv without `max_speed` is no measurement of the speed: a finite bound
+    /// on it fails (it read 0 and always passed), an infinite one does not.
+    #[test]
+    fn a_missing_speed_column_fails_a_speed_bound() {
+        let s = with_outputs("neither", 0, false);
+        assert_eq!(s.density_fluctuation, 0.02);
+        assert_eq!(s.max_speed, f64::INFINITY);
+        let mut bounds = Bounds {
+            density: 1.0,
+            mechanical_gain: 1.0,
+            total_drift: 1.0,
+            max_speed: 10.0,
+        };
+        let failed = std::panic::catch_unwind(|| s.assert_bounds("missing", &bounds))
+            .expect_err("a missing max_speed column passed a speed bound");
+        let message = failed.downcast_ref::<String>().cloned().unwrap_or_default();
+        assert!(message.starts_with("max speed = inf"), "{message}");
+        bounds.max_speed = f64::INFINITY;
+        s.assert_bounds("unbounded", &bounds);
     }
 }

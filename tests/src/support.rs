@@ -66,6 +66,15 @@ pub fn nan_max(a: f64, b: f64) -> f64 {
     }
 }
 
+/// The smaller of two values, NaN if either is: the minimum's fold, as [`nan_max`].
+pub fn nan_min(a: f64, b: f64) -> f64 {
+    if a.is_nan() || b.is_nan() {
+        f64::NAN
+    } else {
+        a.min(b)
+    }
+}
+
 /// Reference data shipped in tests/data, sorted by its first column.
 pub fn reference(file: &str) -> Vec<(f64, f64)> {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -98,12 +107,20 @@ pub fn surge_front(out: &Path, a: f64) -> Vec<(f64, f64)> {
 
 #[cfg(test)]
 mod tests {
-    use super::nan_max;
+    use super::{nan_max, nan_min};
 
     #[test]
     fn nan_max_keeps_a_nan_sample() {
         assert_eq!([1.0, 3.0, 2.0].into_iter().fold(0.0, nan_max), 3.0);
         assert_eq!([-1.0].into_iter().fold(f64::NEG_INFINITY, nan_max), -1.0);
+        assert_eq!(
+            [1.0, -3.0, 2.0].into_iter().fold(f64::INFINITY, nan_min),
+            -3.0
+        );
+        assert!([1.0, f64::NAN, 2.0]
+            .into_iter()
+            .fold(f64::INFINITY, nan_min)
+            .is_nan());
         for at in 0..3 {
             let mut v = [1.0, 3.0, 2.0];
             v[at] = f64::NAN;

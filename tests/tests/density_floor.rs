@@ -20,7 +20,7 @@ use sph_core::StageRegistry;
 use sph_run::runner::{run_keeping_state, RunError, RunOptions};
 use sph_scenario::overrides::Override;
 use sph_scenario::Scenario;
-use sph_tests::support::temp_out;
+use sph_tests::support::{nan_min, temp_out};
 
 const RHO0: f64 = 1000.0;
 
@@ -150,7 +150,7 @@ fn a_pressureless_burst_thins_through_the_density_guard() {
 fn a_density_floor_lets_the_burst_finish() {
     let (status, rho, floored) = burst("burst-floor", &["pipeline.integrate.density_floor=0.9"]);
     assert_eq!(status, "completed");
-    let least = rho.iter().copied().fold(f64::INFINITY, f64::min);
+    let least = rho.iter().copied().fold(f64::INFINITY, nan_min);
     assert!(
         (least - 0.9 * RHO0).abs() < 1e-9,
         "least density {least}, expected the floor 900"

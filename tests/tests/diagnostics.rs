@@ -10,7 +10,7 @@ use sph_core::world::{archetype, column, column_mut};
 use sph_run::runner::{run_keeping_state, RunOptions};
 use sph_scenario::overrides::Override;
 use sph_scenario::Scenario;
-use sph_tests::support::{load, read_csv, run_completed, series, temp_out};
+use sph_tests::support::{load, nan_max, read_csv, run_completed, series, temp_out};
 
 /// A still layer of water 0.1 m deep and, above it, a 9 x 9 block that `Burst` sets
 /// flying apart at the first step: pressureless spray the density floor holds at
@@ -92,7 +92,7 @@ fn the_density_floor_is_reported_apart_from_the_flow() {
     assert_eq!(summary.status, "completed");
     let probes = out.join("probes.csv");
     let col = |name: &str| -> Vec<f64> { series(&probes, name).iter().map(|p| p.1).collect() };
-    let max = |s: &[f64]| s.iter().copied().fold(0.0, f64::max);
+    let max = |s: &[f64]| s.iter().copied().fold(0.0, nan_max);
     let (flow, guarded) = (
         col("max_density_fluctuation"),
         col("guarded_density_fluctuation"),
@@ -211,11 +211,11 @@ fn the_energy_budget_closes_with_the_walls_work() {
     let (header, rows) = read_csv(&out.join("energy.csv"));
     let col = |name: &str| header.iter().position(|h| h == name).unwrap();
     let (work, error, total) = (col("wall_work"), col("closure_error"), col("total"));
-    let max_abs = |k: usize| rows.iter().map(|r| r[k].abs()).fold(0.0, f64::max);
+    let max_abs = |k: usize| rows.iter().map(|r| r[k].abs()).fold(0.0, nan_max);
     let gain = rows
         .iter()
         .map(|r| (r[total] - rows[0][total]).abs())
-        .fold(0.0, f64::max);
+        .fold(0.0, nan_max);
     eprintln!(
         "roll: wall work up to {:.4} J/m, total change up to {gain:.4}, closure error up to {:.5} J/m",
         max_abs(work),

@@ -20,6 +20,15 @@ fn hydrostatic_tank_holds_its_pressure_and_its_particles() {
             "tank.width=0.99",
             "fluid_blocks=[(min: (0.0, 0.0), size: (0.99, 0.6))]",
             "pipeline.vtk_frames.interval=10.0",
+            // The shipped bottom and side sensors, and four on the side wall 0.5, 1, 2
+            // and 4 ds above the floor (the corner, issue 27).
+            "pressure_sensors=[(name: \"bottom\", wall: \"bottom\", at: (0.495, 0.0)), \
+             (name: \"side\", wall: \"left\", at: (0.0, 0.3)), \
+             (name: \"c05\", wall: \"left\", at: (0.0, 0.0075)), \
+             (name: \"c1\", wall: \"left\", at: (0.0, 0.015)), \
+             (name: \"c2\", wall: \"left\", at: (0.0, 0.03)), \
+             (name: \"c4\", wall: \"left\", at: (0.0, 0.06))]",
+            "pipeline.probe.methods=[Shepard, Nearest, Averaged]",
             "pipeline.probe.plots=false",
             "pipeline.energy.plots=false",
         ],
@@ -61,17 +70,33 @@ fn hydrostatic_tank_holds_its_pressure_and_its_particles() {
         100.0 * worst
     );
 
-    // The bottom and side sensors after the first second (start-up transient), every
-    // method, within the same 2 %.
+    // Every sensor after the first second (start-up transient), every method, within
+    // 1 % of its own rho_0 g (H - y_s) at every sample: the acceptance of issues 27 and
+    // 28 for the wall pressure of still water, also in the corner. Measured 0.46 % at
+    // worst (mean +0.2-0.3 %: the kernel's gradient moment and the column's compression
+    // under its weight); Method III at 0.5 ds read -1.1 % before its face was narrowed
+    // to end at the floor.
     let probes = out.join("probes.csv");
-    for (sensor, depth) in [("bottom", h), ("side", h - 0.3)] {
+    let sensors = [
+        ("bottom", 0.0),
+        ("side", 0.3),
+        ("c05", 0.0075),
+        ("c1", 0.015),
+        ("c2", 0.03),
+        ("c4", 0.06),
+    ];
+    for (sensor, y) in sensors {
+        let local = rho0 * g * (h - y);
         for method in ["shepard", "nearest", "averaged"] {
-            for (t, value) in series(&probes, &format!("{sensor}.{method}")) {
+            let column = format!("{sensor}.{method}");
+            let samples = series(&probes, &column);
+            assert!(samples.len() > 100, "{column}: {} samples", samples.len());
+            for (t, value) in samples {
                 if t > 1.0 {
-                    let err = (value - rho0 * g * depth).abs() / scale;
+                    let err = (value - local).abs() / local;
                     assert!(
-                        err < 0.02,
-                        "{sensor}.{method} at t = {t}: {value} Pa, error {:.2} %",
+                        err < 0.01,
+                        "{column} at t = {t}: {value} Pa against {local} Pa, error {:.2} %",
                         100.0 * err
                     );
                 }

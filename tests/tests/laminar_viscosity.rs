@@ -20,6 +20,7 @@ use sph_core::sim::{Constants, Tait};
 use sph_core::world::Particles;
 use sph_stages::terms::laminar_viscosity::{self, LaminarViscosity};
 use sph_stages::terms::{RateTerms, Term};
+use sph_tests::support::nan_max;
 
 const L: f64 = 1e-3;
 const NU: f64 = 1e-6;
@@ -168,7 +169,7 @@ fn errors(us: &[Vec<f64>], times: &[f64]) -> Vec<f64> {
                     let y = ((k / COLS) as f64 + 0.5) * ds;
                     (ui - couette(y, t)).abs() / U0
                 })
-                .fold(0.0, f64::max)
+                .fold(0.0, nan_max)
         })
         .collect()
 }

@@ -104,7 +104,7 @@ fn cell_sorting_changes_results_only_by_round_off() {
             .iter()
             .map(|r| r[k].abs())
             .filter(|v| v.is_finite())
-            .fold(0.0, f64::max)
+            .fold(0.0, nan_max)
             .max(1e-12);
         for (row_a, row_b) in ra.iter().zip(&rb) {
             let (x, y) = (row_a[k], row_b[k]);

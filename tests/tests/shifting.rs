@@ -12,7 +12,7 @@ use sph_core::Sim;
 use sph_run::runner::{run, run_keeping_state, RunOptions};
 use sph_scenario::Scenario;
 use sph_tests::stability::quiet;
-use sph_tests::support::{load, temp_out};
+use sph_tests::support::{load, nan_max, nan_min, temp_out};
 
 /// Positions by particle id.
 fn positions(sim: &Sim) -> Vec<DVec2> {
@@ -57,7 +57,7 @@ fn nearest(x: &[DVec2]) -> Vec<f64> {
             (0..x.len())
                 .filter(|&j| j != i)
                 .map(|j| x[i].distance(x[j]))
-                .fold(f64::INFINITY, f64::min)
+                .fold(f64::INFINITY, nan_min)
         })
         .collect()
 }
@@ -149,11 +149,11 @@ fn top_row_rise(params: &str) -> f64 {
     let scenario = still_water(params);
     let ds = scenario.spacing;
     let (start, end, _) = drive(scenario, |_| {});
-    let top = start.iter().map(|x| x.y).fold(f64::NEG_INFINITY, f64::max);
+    let top = start.iter().map(|x| x.y).fold(f64::NEG_INFINITY, nan_max);
     let rise = (0..start.len())
         .filter(|&i| start[i].y > top - 0.5 * ds)
         .map(|i| end[i].y - start[i].y)
-        .fold(f64::NEG_INFINITY, f64::max);
+        .fold(f64::NEG_INFINITY, nan_max);
     rise / ds
 }
 
