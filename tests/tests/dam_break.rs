@@ -1,7 +1,7 @@
 //! Dam break validation against measured data (tests/data/SOURCES.md).
 
 use sph_tests::support::{
-    interpolate, load, nan_max, reference, run_completed, series, surge_front,
+    interpolate, load, nan_max, nan_min, reference, run_completed, series, surge_front,
 };
 
 const SCENE: &str = include_str!("../../scenarios/dam_break.ron");
@@ -70,6 +70,8 @@ struct P1Run {
     plateau: [f64; 3],
     /// Largest 5 ms transducer mean of Method I over t* 2.3-3.5.
     peak: f64,
+    /// First time the 5 ms transducer mean of Method I is above p* = 0.1.
+    transducer_rise: f64,
 }
 
 const METHODS: [&str; 3] = ["shepard", "nearest", "averaged"];
@@ -127,10 +129,15 @@ fn p1_realisations() -> Vec<P1Run> {
                     .map(|&(t, p)| (t * t_scale, p / p_scale))
                     .collect()
             };
+            let transducer = p1("P1.shepard.transducer");
             let mut run = P1Run {
                 rise: [f64::NAN; 3],
                 plateau: [f64::NAN; 3],
-                peak: largest(&within(&p1("P1.shepard.transducer"), 2.3..=3.5)),
+                peak: largest(&within(&transducer, 2.3..=3.5)),
+                transducer_rise: transducer
+                    .iter()
+                    .find(|p| p.1 > 0.1)
+                    .map_or(f64::NAN, |p| p.0),
             };
             for (m, method) in METHODS.iter().enumerate() {
                 let points = p1(&format!("P1.{method}"));
@@ -158,17 +165,22 @@ fn buchner_p1() -> Vec<(f64, f64)> {
 /// plateau) in the Zhou/Buchner tank at 5,000 particles, t* = t sqrt(g/H), p* = p/(rho g H);
 /// medians over the realisations (see `REALISATIONS`).
 ///
-/// First rise: above p* = 0.1 at Buchner's t* ~ 2.49 (the three digitisations agree to
-/// ~1 %), within +-0.1 (4 %; the probe samples every 0.005 s, i.e. 0.02 in t*, and the
-/// arrival time depends on the thin tip's resolution).
+/// First rise above p* = 0.1 at Buchner's t* ~ 2.49 (the three digitisations agree to
+/// ~1 %):
+/// - the sensor's own channel, the 5 ms transducer mean of Method I, which takes every
+///   step's reading, within 2 % (the acceptance; measured 2.472, -0.7 %, with the
+///   shipped Riemann-solver SPH);
+/// - the raw samples of every method within +-0.1 (4 %): they are taken every 0.005 s
+///   (0.02 in t*) and miss an arrival between two samples (measured 2.574 / 2.533 /
+///   2.554, +1.7 % to +3.4 %).
 ///
 /// Plateau after the impact: the mean p* over t* 2.7-3.3 must lie within the range the
 /// measured P1 itself spans over that window (0.55-0.69 in the TrixiParticles
 /// digitisation). The reason: the record is one experiment, digitised to ~1 % of full
 /// scale, whose pressure moves by about +-0.07 about its mean there; a simulated mean
 /// inside that band is as close as the data resolve the plateau's level. At 0.16 m the
-/// same run reads 0.11, so the check tells the two heights apart. Single realisations
-/// read 0.57-0.73 (Method II, one particle, the widest).
+/// same run reads 0.11, so the check tells the two heights apart. Measured medians
+/// 0.590 / 0.597 / 0.576.
 #[test]
 fn p1_rise_and_plateau_match_buchner() {
     let data = buchner_p1();
@@ -176,9 +188,14 @@ fn p1_rise_and_plateau_match_buchner() {
     assert!((measured - 2.49).abs() < 0.03, "reference rise {measured}");
     let data_plateau = within(&data, 2.7..=3.3);
     assert!(data_plateau.len() >= 5, "too few data points in t* 2.7-3.3");
-    let low = data_plateau.iter().copied().fold(f64::INFINITY, f64::min);
+    let low = data_plateau.iter().copied().fold(f64::INFINITY, nan_min);
     let high = largest(&data_plateau);
     let runs = p1_realisations();
+    let rise = median(runs.iter().map(|r| r.transducer_rise).collect());
+    assert!(
+        (rise / measured - 1.0).abs() < 0.02,
+        "P1.shepard.transducer median first rise at t* = {rise:.3}, Buchner {measured:.3}"
+    );
     for (m, method) in METHODS.iter().enumerate() {
         let rise = median(runs.iter().map(|r| r.rise[m]).collect());
         assert!(
@@ -193,15 +210,17 @@ fn p1_rise_and_plateau_match_buchner() {
     }
 }
 
-/// First-impact peak: with the shipped scheme (Fourtakas's density diffusion) the
-/// 5 ms transducer mean of Method I (`P1.shepard.transducer`, the probe interval; the
-/// data are digitised at 5-20 ms) should peak within 25 % of Buchner's 0.69 over t*
-/// 2.3-3.5 (issue 15's acceptance), as the median over the realisations. Methods II and
-/// III read one particle's acoustic noise and the plateau's ringing and are reported,
-/// not held to it (docs/validation.md, "Density treatment").
+/// First-impact peak: the 5 ms transducer mean of Method I (`P1.shepard.transducer`,
+/// the probe interval; the data are digitised at 5-20 ms) peaks over t* 2.3-3.5 within
+/// 20 % of Buchner's 0.69, as the median over the realisations. Measured with the
+/// shipped Riemann-solver SPH: median 0.776 (+12.5 %; realisations 0.758-0.852); the
+/// bound leaves room for the realisations' spread on another instruction set (their
+/// median moves with the round-off draws), not for the +41 % (0.97) of Fourtakas's
+/// diffusion, which fails it. Issue 27's 10 % is not met (docs/validation.md, "Dam
+/// break P1"). Methods II and III read one particle's acoustic noise and the plateau's
+/// ringing and are reported, not held to it.
 #[test]
-#[ignore = "fails: the median first-impact peak of 5 realisations is 0.97 rho g H (+41 %; single realisations 0.84-1.10, one of them inside the 25 %), docs/validation.md, P1 realisations"]
-fn p1_first_impact_peak_within_a_quarter_of_buchner() {
+fn p1_first_impact_peak_within_a_fifth_of_buchner() {
     let data = buchner_p1();
     let measured_peak = largest(&within(&data, 2.3..=3.5));
     assert!(
@@ -211,7 +230,7 @@ fn p1_first_impact_peak_within_a_quarter_of_buchner() {
     let peaks: Vec<f64> = p1_realisations().iter().map(|r| r.peak).collect();
     let peak = median(peaks.clone());
     assert!(
-        (peak / measured_peak - 1.0).abs() < 0.25,
+        (peak / measured_peak - 1.0).abs() < 0.20,
         "P1.shepard.transducer median first-impact peak {peak:.3} (realisations {peaks:.3?}), Buchner {measured_peak:.3}"
     );
 }

@@ -173,15 +173,15 @@ fn a_missing_study_file_is_called_the_study_file() {
 #[test]
 fn set_errors_name_the_set_argument() {
     let dam = shipped("dam_break.ron").display().to_string();
-    let set = "pipeline.forces.terms.artificial_viscosity.alfa=0.1";
+    let set = "pipeline.forces.terms.riemann_pressure.limitr=1.0";
     let o = engine(&[&dam, "--set", set], &[]);
     let err = stderr(&o);
     assert!(!o.status.success());
     assert!(
-        err.contains(&format!("dam_break.ron: --set {set}: field `alfa`: ")),
+        err.contains(&format!("dam_break.ron: --set {set}: field `limitr`: ")),
         "{err}"
     );
-    assert!(err.contains("did you mean `alpha`?"), "{err}");
+    assert!(err.contains("did you mean `limiter`?"), "{err}");
     let o = engine(&[&dam, "--set", "reinitialise.every"], &[]);
     let err = stderr(&o);
     assert!(
