@@ -1,7 +1,7 @@
 //! A run's results do not depend on the number of worker threads, and a run repeated
 //! gives the same results: every shipped scenario (scenarios/*.ron), at a coarse
-//! resolution and for a fraction of a second, run on one thread, on two, and on two
-//! again, ends with bit-identical particles (positions, velocities, densities by
+//! resolution and for a fraction of a second, run on one thread, on two, on two
+//! again, on three and on four, ends with bit-identical particles (positions, velocities, densities by
 //! particle id) and writes byte-identical probes.csv and energy.csv (and, for the DFSPH
 //! scenarios, the solves' density_solve.csv and divergence_solve.csv). A scenario file
 //! added to scenarios/ without an entry here fails `every_shipped_scenario_is_covered`.
@@ -129,12 +129,21 @@ fn run_on(text: &str, file: &str, coarse: &[&str], threads: usize) -> (PathBuf, 
     (out, state)
 }
 
-/// One thread, two threads, and two threads again give identical results.
+/// One thread, two threads, two threads again, three and four give identical results
+/// (three and four oversubscribe a 2-core machine, which changes how rayon splits the
+/// chunks between workers, not what each chunk sums).
 fn check_deterministic(text: &str, file: &str, coarse: &[&str]) {
     let (one, s1) = run_on(text, file, coarse, 1);
     let (two, s2) = run_on(text, file, coarse, 2);
     let (again, s3) = run_on(text, file, coarse, 2);
-    for (what, dir, state) in [("2 threads", &two, &s2), ("a repeated run", &again, &s3)] {
+    let (three, s4) = run_on(text, file, coarse, 3);
+    let (four, s5) = run_on(text, file, coarse, 4);
+    for (what, dir, state) in [
+        ("2 threads", &two, &s2),
+        ("a repeated run", &again, &s3),
+        ("3 threads", &three, &s4),
+        ("4 threads", &four, &s5),
+    ] {
         if let Some(k) = (0..s1.len()).find(|&k| s1[k] != state[k]) {
             panic!(
                 "{file}: particle {} ends differently on 1 thread and {what} (outputs in {} and {})",
@@ -146,7 +155,7 @@ fn check_deterministic(text: &str, file: &str, coarse: &[&str]) {
         assert_eq!(s1.len(), state.len(), "{file}: particle count, {what}");
         compare_outputs(file, &one, dir, what);
     }
-    for dir in [one, two, again] {
+    for dir in [one, two, again, three, four] {
         let _ = std::fs::remove_dir_all(dir);
     }
 }
