@@ -394,3 +394,78 @@ fn a_dam_break_resumed_in_the_middle_of_a_neighbour_list_is_bit_identical() {
     // A fixed tank writes no walls.pvd.
     same_files_then_clean(full, part, &EVERY_OUTPUT[..3]);
 }
+
+/// Every pair-term scheme resumes bit for bit (issue 28): the coarse dam break of the
+/// test above with each density diffusion, Riemann-solver SPH (the shipped terms), the
+/// laminar viscosity, and particle shifting, stopped at 0.13 s and resumed on one
+/// thread, writes the probes and energy of the run never stopped.
+#[test]
+fn every_scheme_resumes_bit_identical() {
+    let schemes: [(&str, &[&str]); 6] = [
+        ("riemann", &[]),
+        (
+            "fourtakas",
+            &["pipeline.forces.terms=[PressureGradient(), ArtificialViscosity(), Continuity(), Fourtakas()]"],
+        ),
+        (
+            "molteni-colagrossi",
+            &["pipeline.forces.terms=[PressureGradient(), ArtificialViscosity(), Continuity(), MolteniColagrossi()]"],
+        ),
+        (
+            "delta-sph",
+            &["pipeline.forces.terms=[PressureGradient(), ArtificialViscosity(), Continuity(), DeltaSph()]"],
+        ),
+        (
+            "laminar",
+            &["pipeline.forces.terms=[PressureGradient(), ArtificialViscosity(), LaminarViscosity(nu: 1e-6), Continuity(), Fourtakas()]"],
+        ),
+        (
+            "shifting",
+            &["pipeline=[GhostWalls(slip: FreeSlip, hydrostatic: true), NeighbourGrid(), Eos(), \
+               Forces(terms: [RiemannPressure(), Continuity(), RiemannDiffusion()]), \
+               Probe(interval: 0.005, methods: [Shepard], plots: false), Integrate(courant: 0.25), \
+               Shifting(), Energy(interval: 0.01, plots: false)]"],
+        ),
+    ];
+    for (name, sets) in schemes {
+        let dam = || {
+            let mut overrides = vec![
+                "resolution=ParticlesAcross(30)",
+                "end_time=0.3",
+                "pipeline.vtk_frames.interval=0.1",
+                "pipeline.probe.plots=false",
+                "pipeline.energy.plots=false",
+            ];
+            overrides.extend_from_slice(sets);
+            load(DAM, "scenarios/dam_break.ron", &overrides)
+        };
+        let full = uninterrupted(dam(), &format!("restart-{name}-full"));
+        let part = stopped(dam(), &format!("restart-{name}-part"), None, 0.13);
+        resume(dam(), &part, 1);
+        same_files_then_clean(full, part, &["probes.csv", "energy.csv"]);
+    }
+}
+
+/// DFSPH in a rolling tank (moving walls, the solves' warm start and the tank's
+/// motion in the checkpoint) resumes bit for bit.
+#[test]
+fn a_resumed_dfsph_rolling_tank_is_bit_identical() {
+    let tank = || {
+        load(
+            include_str!("../../scenarios/sloshing_dfsph.ron"),
+            "scenarios/sloshing_dfsph.ron",
+            &[
+                "resolution=ParticlesAcross(40)",
+                "end_time=0.5",
+                "tank.motion.ramp=0.0",
+                "pipeline.vtk_frames.interval=0.2",
+                "pipeline.probe.plots=false",
+                "pipeline.snapshots.times=[]",
+            ],
+        )
+    };
+    let full = uninterrupted(tank(), "restart-dfsph-tank-full");
+    let part = stopped(tank(), "restart-dfsph-tank-part", Some(0.1), 0.25);
+    resume(tank(), &part, 1);
+    same_files_then_clean(full, part, &["probes.csv", "density_solve.csv"]);
+}
