@@ -213,3 +213,67 @@ fn readme_lists_every_command() {
         );
     }
 }
+
+/// An unstable run through the command line (issue 28): it exits non-zero, says where
+/// and when on stderr, writes `summary.json` with the reason and `unstable.vtp` with
+/// the fluid at that moment; run in a folder that already holds an earlier run's
+/// checkpoints, it leaves them byte for byte as they were.
+#[test]
+fn an_unstable_run_stops_with_its_diagnostic_and_keeps_earlier_checkpoints() {
+    let out = temp("unstable");
+    let dam = shipped("dam_break.ron").display().to_string();
+    let dir = out.display().to_string();
+    let coarse = [
+        "--set",
+        "resolution=ParticlesAcross(30)",
+        "--threads",
+        "2",
+        "-q",
+    ];
+    let mut first = vec![&dam[..], "--out", &dir, "--set", "end_time=0.3"];
+    first.extend(["--checkpoint-every", "0.1"]);
+    first.extend(coarse);
+    let o = engine(&first, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let kept: Vec<(&str, Vec<u8>)> = ["checkpoint.bin", "checkpoint.prev.bin"]
+        .into_iter()
+        .map(|f| {
+            (
+                f,
+                std::fs::read(out.join(f)).unwrap_or_else(|e| panic!("{f}: {e}")),
+            )
+        })
+        .collect();
+    // A density guard of 2 %: the impact at the right wall (t = 0.6 s) trips it.
+    let mut second = vec![&dam[..], "--out", &dir, "--set", "end_time=0.8"];
+    second.extend(["--set", "pipeline.integrate.density_limit=0.02"]);
+    second.extend(coarse);
+    let o = engine(&second, &[]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("error: step ") && err.contains("stage `integrate`: density"),
+        "{err}"
+    );
+    assert!(err.contains("(outputs written so far are kept in"), "{err}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let status = summary["status"].as_str().unwrap_or_default();
+    assert!(
+        status.starts_with("stopped at step") && status.contains("beyond rho_0 (1 +- 0.02)"),
+        "{status}"
+    );
+    let vtp = std::fs::read_to_string(out.join("unstable.vtp")).expect("unstable.vtp");
+    assert!(
+        vtp.contains("NumberOfPoints=\"450\""),
+        "unstable.vtp: {}",
+        &vtp[..200]
+    );
+    for (f, bytes) in kept {
+        assert!(
+            std::fs::read(out.join(f)).unwrap() == bytes,
+            "{f} changed under the failed run"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&out);
+}
