@@ -24,6 +24,12 @@ pub fn register(registry: &mut StageRegistry) {
         "eos",
         "Tait equation of state: pressure from density",
         |p: Params| {
+            // A NaN floor would compare false with every pressure and leave it NaN.
+            if let Some(f) = p.min_pressure.filter(|f| !f.is_finite()) {
+                return Err(format!(
+                    "field `min_pressure` = {f} is out of range; accepted: Some(<Pa>), a finite number (0 suppresses tension)"
+                ));
+            }
             Ok(Eos {
                 floor: p.min_pressure.unwrap_or(f64::NEG_INFINITY),
             })

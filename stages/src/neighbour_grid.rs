@@ -67,9 +67,10 @@ pub fn register(registry: &mut StageRegistry) {
         "cell-linked list; neighbour lists of the fluid particles",
         |p: Params| {
             if !(p.skin >= 0.0 && p.skin <= 10.0) {
-                return Err(
-                    "field `skin` is out of range; accepted: 0 to 10 particle spacings".into(),
-                );
+                return Err(format!(
+                    "field `skin` = {} is out of range; accepted: 0 to 10 particle spacings",
+                    p.skin
+                ));
             }
             Ok(NeighbourGrid {
                 count: p.count,

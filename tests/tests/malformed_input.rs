@@ -275,6 +275,58 @@ fn cases() -> Vec<Case> {
             Is("h_over_dx"),
             &["5 is out of range", "0.5 to 3.0"],
         ),
+        // NaN, inf and -inf in every class of numeric field (issue 28): a top-level
+        // number, a fluid property, a pair, a resolution, a block size, a sensor's and
+        // a gauge's place, and (below, through --set) a stage's and a term's parameter.
+        case(
+            "end_time NaN",
+            dam("    end_time: 2.0,", "    end_time: NaN,"),
+            LineOf("end_time: NaN"),
+            Is("end_time"),
+            &["NaN is out of range", "finite"],
+        ),
+        case(
+            "sound_speed inf",
+            dam("    fluid: (\n", "    fluid: (\n        sound_speed: inf,\n"),
+            LineOf("sound_speed: inf"),
+            Is("sound_speed"),
+            &["inf is out of range", "finite"],
+        ),
+        case(
+            "gravity NaN",
+            dam("gravity: (0.0, -9.81)", "gravity: (0.0, NaN)"),
+            LineOf("gravity: (0.0, NaN)"),
+            Is("gravity"),
+            &["(0, NaN) is out of range", "two finite numbers"],
+        ),
+        case(
+            "spacing -inf",
+            dam("resolution: ParticlesAcross(100)", "resolution: Spacing(-inf)"),
+            LineOf("resolution: Spacing(-inf)"),
+            Is("resolution"),
+            &["-inf is out of range"],
+        ),
+        case(
+            "block size inf",
+            dam("size: (1.2, 0.6)", "size: (inf, 0.6)"),
+            LineOf("size: (inf, 0.6)"),
+            Is("size"),
+            &["inf is out of range"],
+        ),
+        case(
+            "sensor at NaN",
+            dam("at: (3.22, 0.096)", "at: (3.22, NaN)"),
+            LineOf("at: (3.22, NaN)"),
+            Is("pressure_sensors"),
+            &["at (3.22, NaN) is not on wall `right`"],
+        ),
+        case(
+            "gauge at inf",
+            dam("x: 2.725", "x: inf"),
+            LineOf("x: inf"),
+            Is("x"),
+            &["x = inf is out of range", "finite"],
+        ),
         case(
             "sound_speed zero",
             dam("    fluid: (\n", "    fluid: (\n        sound_speed: 0.0,\n"),
@@ -538,6 +590,46 @@ fn cases() -> Vec<Case> {
                     "--set pipeline.forces.terms.artificial_viscosity.beta=-2: ",
                     "`beta` = -2 is out of range",
                 ],
+            )
+        },
+        Case {
+            overrides: &["pipeline.integrate.courant=NaN"],
+            ..case(
+                "NaN --set stage parameter",
+                DAM.to_string(),
+                Nowhere,
+                Is("courant"),
+                &["--set pipeline.integrate.courant=NaN: ", "NaN is out of range"],
+            )
+        },
+        Case {
+            overrides: &["pipeline.forces.terms.artificial_viscosity.alpha=inf"],
+            ..case(
+                "inf --set term parameter",
+                DAM.to_string(),
+                Nowhere,
+                Is("terms"),
+                &["`alpha` = inf is out of range", "finite"],
+            )
+        },
+        Case {
+            overrides: &["pipeline.eos.min_pressure=Some(-inf)"],
+            ..case(
+                "-inf --set pressure floor",
+                DAM.to_string(),
+                Nowhere,
+                Is("min_pressure"),
+                &["-inf is out of range", "finite"],
+            )
+        },
+        Case {
+            overrides: &["pipeline.neighbour_grid.skin=NaN"],
+            ..case(
+                "NaN --set neighbour skin",
+                DAM.to_string(),
+                Nowhere,
+                Is("skin"),
+                &["NaN is out of range", "0 to 10"],
             )
         },
         Case {

@@ -881,7 +881,20 @@ fn validate(spec: ScenarioSpec, at: &Locator, source: PathBuf) -> Result<Scenari
             format!("spacing {spacing} m leaves the fluid blocks empty; use a finer resolution"),
         ));
     }
-    let g = DVec2::from(spec.fluid.gravity).length();
+    let gravity = DVec2::from(spec.fluid.gravity);
+    if !gravity.is_finite() {
+        return Err(at.error(
+            "gravity",
+            at.doc
+                .key(&["fluid", "gravity"])
+                .or_else(|| at.doc.key(&["fluid"])),
+            format!(
+                "({}, {}) is out of range; accepted: two finite numbers [m/s^2], e.g. (0.0, -9.81)",
+                gravity.x, gravity.y
+            ),
+        ));
+    }
+    let g = gravity.length();
     let tallest = spec
         .fluid_blocks
         .iter()
@@ -998,13 +1011,30 @@ fn validate(spec: ScenarioSpec, at: &Locator, source: PathBuf) -> Result<Scenari
             ));
         };
         let p = DVec2::from(s.at);
-        if w.distance(p).abs() > 1e-6 || w.abscissa(p) < 0.0 || w.abscissa(p) > w.length() {
+        // Written so that a NaN coordinate fails it.
+        let on_wall =
+            w.distance(p).abs() <= 1e-6 && w.abscissa(p) >= 0.0 && w.abscissa(p) <= w.length();
+        if !on_wall {
             return Err(at.error(
                 "pressure_sensors",
                 sensor_place(i, "at"),
                 format!(
                     "sensor `{}` at ({}, {}) is not on wall `{}`; put `at` on the wall",
                     s.name, p.x, p.y, w.name
+                ),
+            ));
+        }
+    }
+    for (i, g) in scenario.spec.wave_gauges.iter().enumerate() {
+        if !g.x.is_finite() {
+            return Err(at.error(
+                "x",
+                at.doc
+                    .element(&["wave_gauges"], i, "x")
+                    .or_else(|| at.doc.key(&["wave_gauges"])),
+                format!(
+                    "gauge `{}` at x = {} is out of range; accepted: a finite abscissa [m]",
+                    g.name, g.x
                 ),
             ));
         }
