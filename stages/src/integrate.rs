@@ -86,8 +86,12 @@ pub fn register(registry: &mut StageRegistry) {
             if !(p.collapse_fraction > 0.0 && p.collapse_fraction < 1.0) {
                 return Err(out("collapse_fraction", p.collapse_fraction, "0 to 1"));
             }
-            if p.density_limit.is_nan() || p.density_limit <= 0.0 {
-                return Err(out("density_limit", p.density_limit, "a number > 0"));
+            if !(p.density_limit > 0.0 && p.density_limit.is_finite()) {
+                return Err(out(
+                    "density_limit",
+                    p.density_limit,
+                    "a finite number > 0 (a large one, e.g. 1e9, leaves the guard off)",
+                ));
             }
             if let Some(f) = p.density_floor {
                 if !(f > 0.0 && f <= 1.0) {

@@ -1,10 +1,11 @@
 //! Mutated scenario files never panic the loader: thousands of random edits of the
 //! shipped scenarios (deleted, inserted and swapped characters and lines, numbers
 //! replaced by edge values, truncation) each load or fail with an error that names a
-//! place (line and column) or a field. The default count keeps this test to a few
+//! place (line and column) or a field, and none that loads holds a NaN or an infinity. The default count keeps this test to a few
 //! seconds; `SPH_FUZZ_CASES=200000 cargo test --release -p sph-tests --test
 //! fuzz_scenarios -- --nocapture` runs a longer campaign.
 
+use sph_scenario::scenario::non_finite_number;
 use sph_scenario::Scenario;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
@@ -167,6 +168,15 @@ fn mutate(text: &str, rng: &mut Rng) -> String {
 }
 
 #[test]
+fn the_non_finite_check_finds_ron_numbers_not_names() {
+    assert!(non_finite_number("(end_time: NaN, x: 1.0)"));
+    assert!(non_finite_number("(gravity: (0.0, -inf))"));
+    assert!(!non_finite_number(
+        "(name: \"inf\", info: 2.0, width: 1e308)"
+    ));
+}
+
+#[test]
 fn mutated_scenarios_give_located_errors_never_panics() {
     let cases: usize = std::env::var("SPH_FUZZ_CASES")
         .ok()
@@ -194,7 +204,17 @@ fn mutated_scenarios_give_located_errors_never_panics() {
                     "case {n}: the loader panicked on this input:\n{text}"
                 ))
             }
-            Ok(Ok(_)) => loaded += 1,
+            Ok(Ok(scenario)) => {
+                loaded += 1;
+                // A number the loader let through non-finite would reach the run: the
+                // scenario as resolved (every default filled in) holds none.
+                let resolved = scenario.resolved_ron();
+                if non_finite_number(&resolved) {
+                    problem = Some(format!(
+                        "case {n}: loaded with a NaN or an infinity:\n{resolved}\ninput:\n{text}"
+                    ));
+                }
+            }
             Ok(Err(e)) => {
                 refused += 1;
                 if !(e.line > 0 || e.field.is_some()) || !e.to_string().starts_with(file) {

@@ -916,6 +916,19 @@ fn validate(spec: ScenarioSpec, at: &Locator, source: PathBuf) -> Result<Scenari
             ));
         }
     };
+    if !sound_speed.is_finite() {
+        // Only a derived speed can be infinite (a given one is checked finite): the
+        // gravity is too large for 10 sqrt(2 g H).
+        return Err(at.error(
+            "gravity",
+            at.doc
+                .key(&["fluid", "gravity"])
+                .or_else(|| at.doc.key(&["fluid"])),
+            format!(
+                "|g| = {g} m/s^2 gives the derived sound speed 10 sqrt(2 g H) = {sound_speed} m/s; give `sound_speed: <m/s>` or a smaller gravity"
+            ),
+        ));
+    }
     let motion = match spec
         .tank
         .as_ref()
@@ -962,6 +975,20 @@ fn validate(spec: ScenarioSpec, at: &Locator, source: PathBuf) -> Result<Scenari
                 "walls",
                 wall_place(i, "name"),
                 format!("two walls are named `{}`; names must be unique", w.name),
+            ));
+        }
+    }
+    for (i, b) in scenario.spec.fluid_blocks.iter().enumerate() {
+        if !(b.min.0.is_finite() && b.min.1.is_finite()) {
+            return Err(at.error(
+                "min",
+                at.doc
+                    .element(&["fluid_blocks"], i, "min")
+                    .or_else(|| at.doc.key(&["fluid_blocks"])),
+                format!(
+                    "({}, {}) is out of range; accepted: two finite coordinates [m]",
+                    b.min.0, b.min.1
+                ),
             ));
         }
     }
@@ -1073,7 +1100,46 @@ fn validate(spec: ScenarioSpec, at: &Locator, source: PathBuf) -> Result<Scenari
         ));
     }
     check_contracts(&scenario.spec.pipeline, at)?;
+    // A number still NaN or infinite (a field without a range check of its own) is
+    // refused at the first such token of the text, naming the field it stands in.
+    if non_finite_number(&scenario.resolved_ron()) {
+        // `NaN`, `inf`, or a literal beyond f64's range (1e309 reads as inf).
+        let token = (0..at.doc.toks.len()).find(|&i| {
+            let n = at.doc.name(i);
+            matches!(n, "NaN" | "inf") || n.parse::<f64>().is_ok_and(|v| v.is_infinite())
+        });
+        let field = token
+            .and_then(|i| at.doc.field_before(at.doc.toks[i].start))
+            .unwrap_or_else(|| "fluid".into());
+        let value = token.map_or("a non-finite number", |i| at.doc.name(i));
+        return Err(at.error(
+            &field,
+            token,
+            format!("{value} is out of range; accepted: a finite number"),
+        ));
+    }
     Ok(scenario)
+}
+
+/// Whether RON `text` holds a NaN or an infinity as a number (the tokens `NaN` and
+/// `inf` outside string quotes), e.g. [`Scenario::resolved_ron`]'s.
+pub fn non_finite_number(text: &str) -> bool {
+    let mut quoted = false;
+    let mut token = String::new();
+    for c in text.chars().chain(std::iter::once(' ')) {
+        if c == '"' {
+            quoted = !quoted;
+        }
+        if !quoted && (c.is_ascii_alphanumeric() || c == '_' || c == '.') {
+            token.push(c);
+            continue;
+        }
+        if token == "NaN" || token == "inf" {
+            return true;
+        }
+        token.clear();
+    }
+    false
 }
 
 /// The declared contracts over the whole pipeline ([`sph_core::contract::check`]), as an
