@@ -882,12 +882,15 @@ fn validate(spec: ScenarioSpec, at: &Locator, source: PathBuf) -> Result<Scenari
         ));
     }
     let gravity = DVec2::from(spec.fluid.gravity);
+    // Where the errors that gravity causes point.
+    let gravity_place = at
+        .doc
+        .key(&["fluid", "gravity"])
+        .or_else(|| at.doc.key(&["fluid"]));
     if !gravity.is_finite() {
         return Err(at.error(
             "gravity",
-            at.doc
-                .key(&["fluid", "gravity"])
-                .or_else(|| at.doc.key(&["fluid"])),
+            gravity_place,
             format!(
                 "({}, {}) is out of range; accepted: two finite numbers [m/s^2], e.g. (0.0, -9.81)",
                 gravity.x, gravity.y
@@ -905,13 +908,9 @@ fn validate(spec: ScenarioSpec, at: &Locator, source: PathBuf) -> Result<Scenari
         None if g > 0.0 => 10.0 * (2.0 * g * tallest).sqrt(),
         None => {
             // The cause is the zero gravity: point there.
-            let place = at
-                .doc
-                .key(&["fluid", "gravity"])
-                .or_else(|| at.doc.key(&["fluid"]));
             return Err(at.error(
                 "sound_speed",
-                place,
+                gravity_place,
                 "cannot be derived without gravity; give `sound_speed: <m/s>`".into(),
             ));
         }
@@ -921,9 +920,7 @@ fn validate(spec: ScenarioSpec, at: &Locator, source: PathBuf) -> Result<Scenari
         // gravity is too large for 10 sqrt(2 g H).
         return Err(at.error(
             "gravity",
-            at.doc
-                .key(&["fluid", "gravity"])
-                .or_else(|| at.doc.key(&["fluid"])),
+            gravity_place,
             format!(
                 "|g| = {g} m/s^2 gives the derived sound speed 10 sqrt(2 g H) = {sound_speed} m/s; give `sound_speed: <m/s>` or a smaller gravity"
             ),
