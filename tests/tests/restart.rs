@@ -39,6 +39,15 @@ const SLOSHING_COARSE: [&str; 6] = [
     "tank.motion.ramp=0.0",
 ];
 
+/// A coarse dam break: 450 particles to 0.3 s.
+const DAM_COARSE: [&str; 5] = [
+    "resolution=ParticlesAcross(30)",
+    "end_time=0.3",
+    "pipeline.vtk_frames.interval=0.1",
+    "pipeline.probe.plots=false",
+    "pipeline.energy.plots=false",
+];
+
 /// The series and frame indexes a resumed run must write as the uninterrupted one.
 const EVERY_OUTPUT: [&str; 4] = ["probes.csv", "energy.csv", "frames.pvd", "walls.pvd"];
 /// A coarse DFSPH dam break: 800 particles sorted every 7 steps, to the first impact.
@@ -361,14 +370,7 @@ fn unwritable_outputs_are_reported_with_the_file_name(
 /// checkpoint and keeps them as long, so its outputs are byte-identical.
 #[test]
 fn a_dam_break_resumed_in_the_middle_of_a_neighbour_list_is_bit_identical() {
-    let coarse = [
-        "resolution=ParticlesAcross(30)",
-        "end_time=0.3",
-        "pipeline.vtk_frames.interval=0.1",
-        "pipeline.probe.plots=false",
-        "pipeline.energy.plots=false",
-    ];
-    let dam = || load(DAM, "scenarios/dam_break.ron", &coarse);
+    let dam = || load(DAM, "scenarios/dam_break.ron", &DAM_COARSE);
     let full = uninterrupted(dam(), "restart-dam-full");
     let part = temp_out("restart-dam-part");
     let opts = RunOptions {
@@ -429,13 +431,7 @@ fn every_scheme_resumes_bit_identical() {
     ];
     for (name, sets) in schemes {
         let dam = || {
-            let mut overrides = vec![
-                "resolution=ParticlesAcross(30)",
-                "end_time=0.3",
-                "pipeline.vtk_frames.interval=0.1",
-                "pipeline.probe.plots=false",
-                "pipeline.energy.plots=false",
-            ];
+            let mut overrides = DAM_COARSE.to_vec();
             overrides.extend_from_slice(sets);
             load(DAM, "scenarios/dam_break.ron", &overrides)
         };

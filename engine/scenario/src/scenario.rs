@@ -955,9 +955,10 @@ fn validate(spec: ScenarioSpec, at: &Locator, source: PathBuf) -> Result<Scenari
         if i + piston_walls >= walls.len() && piston_walls > 0 {
             return at.doc.key(&["piston"]);
         }
-        i.checked_sub(tank_walls)
-            .and_then(|k| at.doc.element(&["walls"], k, key))
-            .or_else(|| at.doc.key(&["walls"]))
+        match i.checked_sub(tank_walls) {
+            Some(k) => at.element("walls", k, key),
+            None => at.doc.key(&["walls"]),
+        }
     };
     for (i, w) in walls.iter().enumerate() {
         if w.length() == 0.0 {
@@ -979,9 +980,7 @@ fn validate(spec: ScenarioSpec, at: &Locator, source: PathBuf) -> Result<Scenari
         if !(b.min.0.is_finite() && b.min.1.is_finite()) {
             return Err(at.error(
                 "min",
-                at.doc
-                    .element(&["fluid_blocks"], i, "min")
-                    .or_else(|| at.doc.key(&["fluid_blocks"])),
+                at.element("fluid_blocks", i, "min"),
                 format!(
                     "({}, {}) is out of range; accepted: two finite coordinates [m]",
                     b.min.0, b.min.1
@@ -1016,16 +1015,11 @@ fn validate(spec: ScenarioSpec, at: &Locator, source: PathBuf) -> Result<Scenari
         }
     }
     let names: Vec<&str> = walls.iter().map(|w| w.name.as_str()).collect();
-    let sensor_place = |i: usize, key: &str| {
-        at.doc
-            .element(&["pressure_sensors"], i, key)
-            .or_else(|| at.doc.key(&["pressure_sensors"]))
-    };
     for (i, s) in scenario.spec.pressure_sensors.iter().enumerate() {
         let Some(w) = walls.iter().find(|w| w.name == s.wall) else {
             return Err(at.error(
                 "pressure_sensors",
-                sensor_place(i, "wall"),
+                at.element("pressure_sensors", i, "wall"),
                 format!(
                     "sensor `{}` is on wall `{}`, which does not exist; walls are: {}",
                     s.name,
@@ -1041,7 +1035,7 @@ fn validate(spec: ScenarioSpec, at: &Locator, source: PathBuf) -> Result<Scenari
         if !on_wall {
             return Err(at.error(
                 "pressure_sensors",
-                sensor_place(i, "at"),
+                at.element("pressure_sensors", i, "at"),
                 format!(
                     "sensor `{}` at ({}, {}) is not on wall `{}`; put `at` on the wall",
                     s.name, p.x, p.y, w.name
@@ -1053,9 +1047,7 @@ fn validate(spec: ScenarioSpec, at: &Locator, source: PathBuf) -> Result<Scenari
         if !g.x.is_finite() {
             return Err(at.error(
                 "x",
-                at.doc
-                    .element(&["wave_gauges"], i, "x")
-                    .or_else(|| at.doc.key(&["wave_gauges"])),
+                at.element("wave_gauges", i, "x"),
                 format!(
                     "gauge `{}` at x = {} is out of range; accepted: a finite abscissa [m]",
                     g.name, g.x
@@ -1364,6 +1356,14 @@ impl Locator<'_> {
     /// An error about the top-level `field`, placed at its `field:`.
     fn field(&self, field: &str, message: String) -> LoadError {
         self.error(field, self.doc.key(&[field]), message)
+    }
+
+    /// Where field `key` of element `i` of the top-level list `list` is, else the
+    /// list's own `list:`.
+    fn element(&self, list: &str, i: usize, key: &str) -> Option<usize> {
+        self.doc
+            .element(&[list], i, key)
+            .or_else(|| self.doc.key(&[list]))
     }
 }
 

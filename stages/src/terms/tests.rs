@@ -54,6 +54,16 @@ fn lattice(nx: usize, ny: usize, rho: impl Fn(DVec2) -> f64) -> hecs::World {
     world
 }
 
+/// Water at rest under a free surface, 21 x `ny` particles: the density the equation
+/// of state gives the hydrostatic pressure rho_0 g (H - y), H half a spacing above the
+/// top row. Returns the world and `ny`.
+fn still_water() -> (hecs::World, usize) {
+    let eos = constants().eos;
+    let ny = 20;
+    let top = (ny - 1) as f64 * DS + DS / 2.0;
+    (lattice(21, ny, |x| eos.density(RHO0 * G * (top - x.y))), ny)
+}
+
 fn packed(world: &hecs::World, fields: sph_core::pair::Fields) -> Records {
     let mut r = Records::default();
     let grads = fields.contains(Field::GradRhoX).then(|| gradients(world));
@@ -149,10 +159,7 @@ fn molteni_colagrossi_diffuses_as_the_laplacian() {
 /// (1 - 1/gamma) p_i/B ~ 1e-4 of it there) and the series' truncation (1e-9).
 #[test]
 fn fourtakas_leaves_hydrostatic_water_at_rest() {
-    let eos = constants().eos;
-    let ny = 20;
-    let top = (ny - 1) as f64 * DS + DS / 2.0;
-    let world = lattice(21, ny, |x| eos.density(RHO0 * G * (top - x.y)));
+    let (world, ny) = still_water();
     let p = Params { delta: 0.1 };
     for row in [ny - 1, ny - 2, ny / 2] {
         let i = 10 * ny + row;
@@ -300,10 +307,7 @@ fn delta_sph_vanishes_on_a_linear_field_also_at_the_surface() {
             "row {row}: delta-SPH D_i = {d:e}, Molteni-Colagrossi {mc:e}"
         );
     }
-    let eos = constants().eos;
-    let ny = 20;
-    let top = (ny - 1) as f64 * DS + DS / 2.0;
-    let world = lattice(21, ny, |x| eos.density(RHO0 * G * (top - x.y)));
+    let (world, ny) = still_water();
     for row in [ny - 1, ny - 2] {
         let i = 10 * ny + row;
         let d = diffusion_of(DeltaSph::build(&p, &constants()), &world, i);
@@ -501,10 +505,7 @@ fn riemann_terms_sum_what_zhang_hu_and_adams_write() {
 /// support, ~1e-4 of it, is what a removal of the linear part leaves).
 #[test]
 fn riemann_diffusion_leaves_hydrostatic_water_at_rest() {
-    let eos = constants().eos;
-    let ny = 20;
-    let top = (ny - 1) as f64 * DS + DS / 2.0;
-    let world = lattice(21, ny, |x| eos.density(RHO0 * G * (top - x.y)));
+    let (world, ny) = still_water();
     let diffusion = |text: &str, i: usize| {
         sums_of(text, &world, i, Isa::SCALAR).drho
             - sums_of("[Continuity()]", &world, i, Isa::SCALAR).drho
