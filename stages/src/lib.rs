@@ -32,6 +32,8 @@ pub mod sort_particles;
 pub mod terms;
 pub mod transducer;
 pub mod vtk_frames;
+pub mod wall_particles;
+pub mod wall_pressure;
 pub(crate) mod wall_work;
 
 use sph_core::StageRegistry;
@@ -39,6 +41,8 @@ use sph_core::StageRegistry;
 /// Registers every standard stage.
 pub fn register_standard(registry: &mut StageRegistry) {
     ghost_walls::register(registry);
+    wall_particles::register(registry);
+    wall_pressure::register(registry);
     neighbour_grid::register(registry);
     reinitialise::register(registry);
     eos::register(registry);

@@ -69,6 +69,7 @@ pub fn sort_by_cell(
     if let Some(ghost) = archetype::<Ghost>(world) {
         column_mut::<Ghost>(ghost)?
             .par_iter_mut()
+            .filter(|g| !g.is_wall_particle())
             .for_each(|g| g.source = inverse[g.source as usize]);
     }
     Ok(true)

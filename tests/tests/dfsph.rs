@@ -193,3 +193,29 @@ fn dfsph_still_water_runs_at_h_over_ds_2_with_the_relaxation_capped() {
         );
     }
 }
+
+/// The DFSPH solves carry each ghost's pressure and velocity from its mirrored source
+/// (`GhostReflections`, which `GhostWalls` writes); fixed wall particles have none, and
+/// the loader refuses the pipeline with the solve's line.
+#[test]
+fn dfsph_refuses_fixed_wall_particles_at_load() {
+    let text = include_str!("../../scenarios/dam_break_dfsph.ron").replace(
+        "GhostWalls(slip: FreeSlip, hydrostatic: true),",
+        "WallParticles(),",
+    );
+    assert!(text.contains("WallParticles()"));
+    let Err(e) = sph_scenario::Scenario::from_str(
+        &text,
+        "scenarios/dam_break_dfsph.ron",
+        &[],
+        &sph_stages::standard_registry(),
+    ) else {
+        panic!("a DFSPH pipeline on wall particles loaded");
+    };
+    let shown = e.to_string();
+    assert!(
+        shown.starts_with("scenarios/dam_break_dfsph.ron:40:9:")
+            && shown.contains("DivergenceSolve reads `GhostReflections`"),
+        "{shown}"
+    );
+}

@@ -8,31 +8,60 @@ use sph_tests::support::{load, nan_max, run_completed, series};
 
 const SCENE: &str = include_str!("../../scenarios/hydrostatic.ron");
 
+/// H/ds = 40 as docs/analytic.md asks; the tank is made 0.99 m wide so 66 whole
+/// columns fill it. The shipped bottom and side sensors, and four on the side wall
+/// 0.5, 1, 2 and 4 ds above the floor (the corner, issue 27).
+const STILL_TANK: &[&str] = &[
+    "resolution=Spacing(0.015)",
+    "tank.width=0.99",
+    "fluid_blocks=[(min: (0.0, 0.0), size: (0.99, 0.6))]",
+    "pipeline.vtk_frames.interval=10.0",
+    "pressure_sensors=[(name: \"bottom\", wall: \"bottom\", at: (0.495, 0.0)), \
+     (name: \"side\", wall: \"left\", at: (0.0, 0.3)), \
+     (name: \"c05\", wall: \"left\", at: (0.0, 0.0075)), \
+     (name: \"c1\", wall: \"left\", at: (0.0, 0.015)), \
+     (name: \"c2\", wall: \"left\", at: (0.0, 0.03)), \
+     (name: \"c4\", wall: \"left\", at: (0.0, 0.06))]",
+    "pipeline.probe.methods=[Shepard, Nearest, Averaged]",
+    "pipeline.probe.plots=false",
+    "pipeline.energy.plots=false",
+];
+
+/// Asserts that every sensor of [`STILL_TANK`], every method, reads within `bound`
+/// (a fraction) of its own rho_0 g (H - y_s) at every sample after `after` seconds.
+fn every_sensor_within(probes: &std::path::Path, after: f64, bound: f64) {
+    let (rho0, g, h): (f64, f64, f64) = (1000.0, 9.81, 0.6);
+    for (sensor, y) in [
+        ("bottom", 0.0),
+        ("side", 0.3),
+        ("c05", 0.0075),
+        ("c1", 0.015),
+        ("c2", 0.03),
+        ("c4", 0.06),
+    ] {
+        let local = rho0 * g * (h - y);
+        for method in ["shepard", "nearest", "averaged"] {
+            let column = format!("{sensor}.{method}");
+            let samples = series(probes, &column);
+            assert!(samples.len() > 100, "{column}: {} samples", samples.len());
+            let mut worst: f64 = 0.0;
+            for (t, value) in samples {
+                if t > after {
+                    worst = nan_max(worst, (value - local).abs() / local);
+                }
+            }
+            assert!(
+                worst < bound,
+                "{column}: {:.2} % from {local} Pa after {after} s",
+                100.0 * worst
+            );
+        }
+    }
+}
+
 #[test]
 fn hydrostatic_tank_holds_its_pressure_and_its_particles() {
-    // H/ds = 40 as docs/analytic.md asks; the tank is made 0.99 m wide so 66 whole columns
-    // fill it.
-    let scenario = load(
-        SCENE,
-        "scenarios/hydrostatic.ron",
-        &[
-            "resolution=Spacing(0.015)",
-            "tank.width=0.99",
-            "fluid_blocks=[(min: (0.0, 0.0), size: (0.99, 0.6))]",
-            "pipeline.vtk_frames.interval=10.0",
-            // The shipped bottom and side sensors, and four on the side wall 0.5, 1, 2
-            // and 4 ds above the floor (the corner, issue 27).
-            "pressure_sensors=[(name: \"bottom\", wall: \"bottom\", at: (0.495, 0.0)), \
-             (name: \"side\", wall: \"left\", at: (0.0, 0.3)), \
-             (name: \"c05\", wall: \"left\", at: (0.0, 0.0075)), \
-             (name: \"c1\", wall: \"left\", at: (0.0, 0.015)), \
-             (name: \"c2\", wall: \"left\", at: (0.0, 0.03)), \
-             (name: \"c4\", wall: \"left\", at: (0.0, 0.06))]",
-            "pipeline.probe.methods=[Shepard, Nearest, Averaged]",
-            "pipeline.probe.plots=false",
-            "pipeline.energy.plots=false",
-        ],
-    );
+    let scenario = load(SCENE, "scenarios/hydrostatic.ron", STILL_TANK);
     let (rho0, g, h): (f64, f64, f64) = (1000.0, 9.81, 0.6);
     let support = scenario.spec.kernel.support_factor() * scenario.h;
     let (summary, sim, out) = run_completed(scenario, "hydrostatic", 2);
@@ -76,33 +105,14 @@ fn hydrostatic_tank_holds_its_pressure_and_its_particles() {
     // worst (mean +0.2-0.3 %: the kernel's gradient moment and the column's compression
     // under its weight); Method III at 0.5 ds read -1.1 % before its face was narrowed
     // to end at the floor.
+    // Every sensor after the first second (start-up transient), every method, within
+    // 1 % of its own rho_0 g (H - y_s) at every sample: the acceptance of issues 27 and
+    // 28 for the wall pressure of still water, also in the corner. Measured 0.46 % at
+    // worst (mean +0.2-0.3 %: the kernel's gradient moment and the column's compression
+    // under its weight); Method III at 0.5 ds read -1.1 % before its face was narrowed
+    // to end at the floor.
     let probes = out.join("probes.csv");
-    let sensors = [
-        ("bottom", 0.0),
-        ("side", 0.3),
-        ("c05", 0.0075),
-        ("c1", 0.015),
-        ("c2", 0.03),
-        ("c4", 0.06),
-    ];
-    for (sensor, y) in sensors {
-        let local = rho0 * g * (h - y);
-        for method in ["shepard", "nearest", "averaged"] {
-            let column = format!("{sensor}.{method}");
-            let samples = series(&probes, &column);
-            assert!(samples.len() > 100, "{column}: {} samples", samples.len());
-            for (t, value) in samples {
-                if t > 1.0 {
-                    let err = (value - local).abs() / local;
-                    assert!(
-                        err < 0.01,
-                        "{column} at t = {t}: {value} Pa against {local} Pa, error {:.2} %",
-                        100.0 * err
-                    );
-                }
-            }
-        }
-    }
+    every_sensor_within(&probes, 1.0, 0.01);
 
     // energy.csv starts with the initial state at t = 0: water at rest (no kinetic
     // energy, nothing dissipated), potential M g H / 2 of the uniform column (to 1 %:
@@ -130,4 +140,36 @@ fn hydrostatic_tank_holds_its_pressure_and_its_particles() {
         fastest < bound,
         "max speed {fastest} m/s exceeds {bound} m/s"
     );
+}
+
+/// The same still tank on fixed wall particles with extrapolated pressure
+/// (`WallParticles()` and `WallPressure()`, Adami et al. 2012) in place of mirrored
+/// ghosts: no particle reaches a wall, and every sensor, in the corner too, reads its
+/// rho_0 g (H - y_s) within 1 % at every sample after the start-up transient.
+#[test]
+fn a_still_tank_on_wall_particles_reads_hydrostatic_pressure_at_every_sensor() {
+    let text = SCENE
+        .replace(
+            "GhostWalls(slip: FreeSlip, hydrostatic: true),",
+            "WallParticles(),",
+        )
+        .replace(
+            "        Eos(),\n",
+            "        Eos(),\n        WallPressure(),\n",
+        );
+    assert!(text.contains("WallParticles()") && text.contains("WallPressure()"));
+    let scenario = load(&text, "scenarios/hydrostatic.ron", STILL_TANK);
+    let (summary, _sim, out) = run_completed(scenario, "hydrostatic_wall_particles", 2);
+    assert_eq!(
+        summary.diagnostics.get("wall_reflections"),
+        None,
+        "{:?}",
+        summary.diagnostics
+    );
+    // 1 %: the acceptance for still water (issue 27), as for the mirrored walls;
+    // measured 0.59 % at worst (0.52-0.59 % at the corner sensors). The fluid's
+    // starting lattice is in balance with the mirrors' push, not exactly with the wall
+    // particles', and the acoustic ringing this sets off decays over about two seconds
+    // (+1.1 % at the bottom at 1-1.5 s, +0.6 % at 2-2.5 s at H/ds 48), hence t > 2 s.
+    every_sensor_within(&out.join("probes.csv"), 2.0, 0.01);
 }

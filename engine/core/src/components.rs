@@ -86,6 +86,17 @@ pub struct Ghost {
     pub source: u32,
 }
 
+impl Ghost {
+    /// The `source` of a fixed wall particle (the `WallParticles` stage), which mirrors
+    /// no fluid particle.
+    pub const WALL_PARTICLE: u32 = u32::MAX;
+
+    /// Whether this is a fixed wall particle rather than a mirror image.
+    pub fn is_wall_particle(&self) -> bool {
+        self.source == Self::WALL_PARTICLE
+    }
+}
+
 /// A straight wall segment from `a` to `b`; the fluid lies on its left
 /// (the inward normal is the direction a->b turned 90 degrees counter-clockwise).
 /// As a component it holds the wall at rest, in the frame of the body it rides on (the

@@ -469,6 +469,10 @@ pub fn refresh_ghost_density(sim: &Sim) -> Result<(), StepError> {
         .into_par_iter()
         .enumerate()
         .for_each(|(k, (rho, g, x))| {
+            // A wall particle's density follows from its extrapolated pressure.
+            if g.is_wall_particle() {
+                return;
+            }
             let s = g.source as usize;
             let body = walls.and_then(|w| {
                 let wall = w[k].0;

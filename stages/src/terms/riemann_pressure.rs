@@ -11,7 +11,11 @@
 //! with rhobar and cbar the pair's mean density and sound speed. It replaces both
 //! `PressureGradient` and `ArtificialViscosity`; the dissipative part
 //! rhobar beta U / (rho_i rho_j) takes m_j (that) v_ij . grad_i W_ij of kinetic energy
-//! per second from a pair, booked as viscous dissipation.
+//! per second from a pair, booked as viscous dissipation. The dissipation is the
+//! scheme's viscosity: against a wall it reads the wall's viscous velocity
+//! ([`Term::wall_shear`]: the ghosts' `ShearVx`, `ShearVy`), so a free-slip wall of
+//! fixed particles does not brake the fluid sliding along it; the pressures
+//! p_i + p_j do not depend on it.
 
 use super::riemann::states;
 use super::Term;
@@ -39,6 +43,8 @@ pub struct RiemannPressure {
     /// A length far below any pair distance, so that a pair at r = 0 (whose kernel
     /// gradient is 0) divides by no zero.
     tiny: f64,
+    /// v_ij from the ghosts' viscous velocities ([`Term::wall_shear`]).
+    shear: bool,
 }
 
 impl Term for RiemannPressure {
@@ -59,20 +65,27 @@ impl Term for RiemannPressure {
         Self {
             eta: p.limiter,
             tiny: 1e-9 * c.h,
+            shear: false,
         }
+    }
+    fn wall_shear(&mut self) {
+        self.shear = true;
     }
 }
 
 impl RateTerm for RiemannPressure {
     fn reads(&self) -> Fields {
-        <Self as Term>::READS
+        match self.shear {
+            true => <Self as Term>::READS.with(Fields::SHEAR),
+            false => <Self as Term>::READS,
+        }
     }
     const USES_COEF: bool = true;
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
         let c = L::splat;
         let s = states(me, p);
-        let (wx, wy) = p.v_ij(me);
+        let (wx, wy) = p.viscous_v_ij(me, self.shear);
         // U_ij = v_ij . x_ji / r: positive when the pair approaches.
         let u = (L::zero() - (wx * p.dx + wy * p.dy)) / p.r.max(c(self.tiny));
         // min(eta max(U, 0), cbar) as -max(-eta max(U, 0), -cbar): lanes have no min.

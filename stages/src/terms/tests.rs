@@ -342,6 +342,10 @@ fn viscous_terms_read_the_ghosts_no_slip_velocities_and_continuity_does_not() {
         "[ArtificialViscosity(alpha: 0.1)]",
         "[LaminarViscosity(nu: 0.001)]",
         "[PressureGradient(), ArtificialViscosity(), LaminarViscosity(nu: 0.001), Continuity()]",
+        // Riemann-solver SPH's dissipation is its viscosity (the pressures do not read
+        // velocities); its continuity and diffusion read `Velocity`.
+        "[RiemannPressure(limiter: 3.0)]",
+        "[RiemannPressure(limiter: 3.0), Continuity(), RiemannDiffusion()]",
     ] {
         let specs: Vec<TermSpec> = sph_core::registry::ron_options().from_str(text).unwrap();
         let shear = RateTerms::build(&specs, &constants(), true);

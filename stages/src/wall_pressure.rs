@@ -1,0 +1,227 @@
+//! The pressure of the fixed wall particles (`WallParticles`), extrapolated from the
+//! fluid (Adami, Hu & Adams 2012, eq. 27; docs/physics.md, "Walls: fixed wall
+//! particles"):
+//!
+//!   p_w = [ sum_f p_f W_wf + (g - a_w) . sum_f rho_f (x_w - x_f) W_wf ] / sum_f W_wf
+//!
+//! over the fluid particles f within the kernel support of wall particle w, a_w the
+//! acceleration of the wall's body at x_w. The second sum carries the pressure
+//! gradient that the fluid's acceleration relative to the wall sets up (hydrostatic in
+//! still water), so that the wall pushes back what the fluid would push on fluid
+//! beyond it. The wall particle's density is the Tait density of p_w, so the
+//! continuity and momentum pairs read one consistent state. A wall particle with no
+//! fluid within its support is seen by no fluid particle; it keeps p = 0, rho = rho_0.
+//!
+//! The wall particles move with their wall (`WallParticles`): continuity and the
+//! pressures read the wall's own velocity v_b, as Adami et al. prescribe (sec. 2.3),
+//! so no fluid enters the wall. The viscous terms (and Riemann-solver SPH's
+//! dissipation) read a second velocity (`vocab::NoSlipVelocities`), from the fluid's
+//! velocity smoothed the same way, u_f = sum_f v_f W_wf / sum_f W_wf (their eq. 22):
+//! with `slip: FreeSlip` v_b plus the tangential part of u_f - v_b (no shear: the
+//! fluid slides along the wall undisturbed), with `slip: NoSlip` 2 v_b - u_f (their
+//! eq. 23: zero velocity at the wall), with `slip: WallVelocity` v_b itself (every
+//! term reads the wall's velocity, so a fluid sliding along the wall is braked by the
+//! dissipation of each pair's approach). A wall particle in a corner takes the tangent
+//! of the wall it was laid out for.
+//!
+//! Runs after `Eos` (the fluid's pressures) and before the rate stages. The sums are
+//! taken over the fluid's neighbour lists in fluid order, one thread, so the result is
+//! the same for any thread count; only the few fluid particles with a wall particle in
+//! their lists contribute.
+
+use glam::DVec2;
+use serde::{Deserialize, Serialize};
+use sph_core::components::{Density, Fluid, Ghost, MirrorWall, Position, Pressure, Velocity};
+use sph_core::contract::Access;
+use sph_core::kernel::Kernel;
+use sph_core::sim::Sim;
+use sph_core::stage::{SetupError, Stage, StepError};
+use sph_core::vocab::{require_neighbours, Neighbours, NoSlipVelocities, WallPose};
+use sph_core::world::{archetype, column, column_mut};
+use sph_core::{with_kernel, StageRegistry};
+
+/// Tangential velocity condition at the walls, for the viscous terms.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Slip {
+    /// No wall shear.
+    #[default]
+    FreeSlip,
+    /// Zero velocity at the wall.
+    NoSlip,
+    /// The wall's own velocity, as continuity reads.
+    WallVelocity,
+}
+
+#[derive(Debug, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Params {
+    /// Default FreeSlip.
+    pub slip: Slip,
+}
+
+pub fn register(registry: &mut StageRegistry) {
+    registry.register(
+        "wall_pressure",
+        "extrapolate the fluid's pressure to the wall particles (Adami et al. 2012)",
+        |p: Params| {
+            Ok(WallPressure {
+                slip: p.slip,
+                sums: Vec::new(),
+            })
+        },
+    );
+}
+
+/// Per wall particle: sum W, sum p W, sum rho (x_w - x_f) W, sum v W.
+#[derive(Clone, Copy, Default)]
+struct Sums {
+    w: f64,
+    pw: f64,
+    rho_r: DVec2,
+    vw: DVec2,
+}
+
+pub struct WallPressure {
+    slip: Slip,
+    sums: Vec<Sums>,
+}
+
+impl Stage for WallPressure {
+    fn name(&self) -> &'static str {
+        "wall_pressure"
+    }
+
+    fn resumes_between_runs(&self) -> bool {
+        true
+    }
+
+    fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
+        require_neighbours(sim, "wall_pressure")?;
+        sim.resources.insert(NoSlipVelocities::default());
+        Ok(())
+    }
+
+    fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
+        let (Some(fluid), Some(ghost)) = (
+            archetype::<Fluid>(&sim.world),
+            archetype::<Ghost>(&sim.world),
+        ) else {
+            return Ok(());
+        };
+        let Some(nb) = sim.resources.get::<Neighbours>() else {
+            return Err(StepError::Internal(
+                "WallPressure needs the neighbour lists: NeighbourGrid must run before it".into(),
+            ));
+        };
+        let (fx, fp, fr, fv) = (
+            column::<Position>(fluid)?,
+            column::<Pressure>(fluid)?,
+            column::<Density>(fluid)?,
+            column::<Velocity>(fluid)?,
+        );
+        let (gx, gs, gw) = (
+            column::<Position>(ghost)?,
+            column::<Ghost>(ghost)?,
+            column::<MirrorWall>(ghost)?,
+        );
+        let n = fx.len();
+        if nb.n_fluid != n || nb.n_ghost != gx.len() {
+            return Err(StepError::Internal(format!(
+                "the neighbour lists cover {} fluid and {} ghost particles but the world holds {n} and {}",
+                nb.n_fluid,
+                nb.n_ghost,
+                gx.len()
+            )));
+        }
+        self.sums.clear();
+        self.sums.resize(gx.len(), Sums::default());
+        let c = &sim.constants;
+        let support = c.support();
+        with_kernel!(c.kernel, c.h, |k| {
+            for i in 0..n {
+                let list = nb.of(i);
+                // The ghosts are last in each list; most particles have none.
+                if list.last().is_none_or(|&j| (j as usize) < n) {
+                    continue;
+                }
+                let first = list.partition_point(|&j| (j as usize) < n);
+                for &j in &list[first..] {
+                    let g = j as usize - n;
+                    if !gs[g].is_wall_particle() {
+                        continue;
+                    }
+                    let r = gx[g].0 - fx[i].0;
+                    let d = r.length();
+                    if d >= support {
+                        continue;
+                    }
+                    let w = k.w(d);
+                    let s = &mut self.sums[g];
+                    s.w += w;
+                    s.pw += fp[i].0 * w;
+                    s.rho_r += fr[i].0 * w * r;
+                    s.vw += w * fv[i].0;
+                }
+            }
+        });
+        // The few walls now, looked up by entity for each wall particle.
+        let walls: Vec<(hecs::Entity, WallPose)> = sim
+            .world
+            .query::<(hecs::Entity, &WallPose)>()
+            .iter()
+            .map(|(e, w)| (e, *w))
+            .collect();
+        let (eos, g) = (c.eos, c.gravity);
+        let mut gp = column_mut::<Pressure>(ghost)?;
+        let mut gr = column_mut::<Density>(ghost)?;
+        let gv = column::<Velocity>(ghost)?;
+        let mut viscous = sim.resources.take::<NoSlipVelocities>().unwrap_or_default();
+        viscous.velocity.clear();
+        viscous.velocity.extend(gv.iter().map(|v| v.0));
+        // No stage changes fluid velocities between here and the forces (the DFSPH
+        // solves, which would, refuse wall particles).
+        viscous.sign.clear();
+        viscous.sign.resize(gv.len(), 0.0);
+        for (k, s) in self.sums.iter().enumerate() {
+            if !gs[k].is_wall_particle() {
+                continue;
+            }
+            let Some((_, wall)) = walls.iter().find(|(e, _)| *e == gw[k].0) else {
+                return Err(StepError::Internal(format!(
+                    "wall particle {k} rides on a wall the world no longer holds"
+                )));
+            };
+            if s.w > 0.0 {
+                let x = gx[k].0;
+                let a_w = wall.body.acceleration_at(x);
+                gp[k].0 = (s.pw + (g - a_w).dot(s.rho_r)) / s.w;
+                let (v_b, u) = (wall.body.velocity_at(x), s.vw / s.w);
+                viscous.velocity[k] = match self.slip {
+                    Slip::FreeSlip => v_b + (u - v_b).dot(wall.tangent()) * wall.tangent(),
+                    Slip::NoSlip => 2.0 * v_b - u,
+                    Slip::WallVelocity => v_b,
+                };
+            } else {
+                gp[k].0 = 0.0;
+            }
+            gr[k].0 = eos.density(gp[k].0);
+        }
+        sim.resources.insert(viscous);
+        Ok(())
+    }
+
+    /// Reads the fluid's pressures, densities and velocities and the wall particles'
+    /// places; updates the wall particles' pressure and density and writes their
+    /// viscous velocities.
+    fn access(&self) -> Access {
+        Access::new()
+            .reads::<Neighbours>()
+            .reads::<Position>()
+            .reads::<Pressure>()
+            .reads::<Density>()
+            .reads::<Velocity>()
+            .reads::<WallPose>()
+            .updates::<Ghost>()
+            .writes::<NoSlipVelocities>()
+    }
+}
