@@ -760,6 +760,42 @@ fn cases() -> Vec<Case> {
             Is("period"),
             &["-1", "accepted: a finite number > 0"],
         ),
+        // Found by the fuzzer's runs (issue 28): each loaded, and the first run's
+        // pressures or the tank's acceleration went to NaN or infinity.
+        case(
+            "roll period below a microsecond",
+            dam_value(
+                "tank",
+                "(width: 3.22, height: 1.8, motion: (roll: (amplitude: 4.0, period: 1e-320)))",
+            ),
+            LineOf("tank:"),
+            Is("roll"),
+            &["period 1e-320 s is out of range", "seconds from 1e-6"],
+        ),
+        case(
+            "ramp below a microsecond",
+            dam_value(
+                "tank",
+                "(width: 3.22, height: 1.8, motion: (roll: (amplitude: 4.0, period: 1.0), ramp: 1e-320))",
+            ),
+            LineOf("tank:"),
+            Is("ramp"),
+            &["1e-320 is out of range", "0 (no ramp) or seconds from 1e-6"],
+        ),
+        case(
+            "gamma near the largest float",
+            dam("gamma: 7.0,", "gamma: 1e308,"),
+            LineOf("gamma: 1e308"),
+            Is("gamma"),
+            &["1e308 is out of range", "1 to 20"],
+        ),
+        case(
+            "a stiffness that overflows",
+            dam("density: 1000.0,", "density: 1e307,"),
+            LineOf("fluid:"),
+            Is("sound_speed"),
+            &["Tait stiffness", "inf Pa", "finite, positive stiffness"],
+        ),
         case(
             "motion series file missing",
             dam_value(

@@ -132,9 +132,25 @@ fn sensors_ride_with_the_tank() {
     }
 }
 
+/// The first mode where linear theory puts it: the SPH response's vertex within 2 %
+/// of linear theory's vertex for the same motion and window, sampled every 0.01
+/// sigma_1 around the peak. Measured +1.52 % at this test's h/ds = 12 (the same
+/// sweep every 0.01 from 0.90 to 1.10; thinned to 0.02 or 0.03, +1.49 to +1.68 %).
+/// Issue 28's acceptance is 1 %: the gap shrinks with resolution, +0.93 % at h/ds 24
+/// and +0.59 % at 48 (docs/validation.md), so 1 % is held at h/ds 24 by the ignored
+/// `small_roll_response_at_h_over_ds_24_peaks_within_1_percent_of_linear_theory`
+/// (9 minutes on 2 shared cores), and this test holds what h/ds 12 reaches.
 #[test]
 fn small_roll_response_peaks_at_the_first_natural_frequency_and_matches_linear_theory_off_it() {
-    small_roll_response("roll_sweep", None);
+    small_roll_response("roll_sweep", None, 12, Some(0.02));
+}
+
+/// Issue 28's 1 % at h/ds 24: measured +0.93 % (SPH 0.9938 sigma_1, linear theory
+/// 0.9847, sampled every 0.01).
+#[test]
+#[ignore = "long: 11 cases of 40-60 s at h/ds 24 (9 min on 2 shared cores); last measured 2026-12-03: passes, +0.93 %"]
+fn small_roll_response_at_h_over_ds_24_peaks_within_1_percent_of_linear_theory() {
+    small_roll_response("roll_sweep_24", None, 24, Some(0.01));
 }
 
 /// The same sweep with the DFSPH pipeline (docs/physics.md, "DFSPH") in place of the
@@ -149,18 +165,27 @@ fn small_roll_response_with_dfsph_peaks_at_the_first_natural_frequency() {
     let pipeline = "pipeline=[GhostWalls(slip: FreeSlip, hydrostatic: true), NeighbourGrid(), \
         DfsphFactor(), DivergenceSolve(), Forces(terms: [ArtificialViscosity(alpha: 0.03)]), \
         DensitySolve(), Probe(interval: 0.005, roll_moment: true, plots: false), Advance()]";
-    small_roll_response("roll_sweep_dfsph", Some(pipeline));
+    small_roll_response("roll_sweep_dfsph", Some(pipeline), 12, None);
 }
 
-/// Roll of 0.5 deg (linear), h/ds = 12, swept across the first mode (sigma_1 = 7.239
-/// rad/s for L = 0.5 m, h = 0.2 m), with `pipeline` replacing the tank's if given. Each
-/// case: one-period smooth start, 5 periods to settle, 5 fitted.
-fn small_roll_response(tag: &str, pipeline: Option<&str>) {
+/// Roll of 0.5 deg (linear), water depth over ds = `depth_over_ds` (12 or 24), swept
+/// across the first mode (sigma_1 = 7.239 rad/s for L = 0.5 m, h = 0.2 m) every 0.01
+/// sigma_1 from 0.96 to 1.04 and at 0.7 and 1.3, with `pipeline` replacing the tank's
+/// if given. Each case: one-period smooth start, 5 periods to settle, 5 fitted. With
+/// `vertex_bound`, the SPH vertex must be within it (a fraction) of linear theory's.
+fn small_roll_response(
+    tag: &str,
+    pipeline: Option<&str>,
+    depth_over_ds: u32,
+    vertex_bound: Option<f64>,
+) {
     let sigma1 = 7.238827;
-    let ratios = [0.7, 0.94, 0.97, 1.0, 1.03, 1.06, 1.3];
+    let ratios = [
+        0.7, 0.96, 0.97, 0.98, 0.99, 1.0, 1.01, 1.02, 1.03, 1.04, 1.3,
+    ];
     let omegas: Vec<String> = ratios.iter().map(|r| format!("{}", r * sigma1)).collect();
     let overrides: Vec<sph_scenario::overrides::Override> = [
-        "resolution=Spacing(0.016666666666666666)".to_string(),
+        format!("resolution=Spacing({})", 0.2 / depth_over_ds as f64),
         "tank.motion=(roll: (amplitude: 0.5, period: 1.0))".to_string(),
         format!(
             "sweep=(omega: [{}], settle_periods: 5.0, fit_periods: 5.0)",
@@ -217,6 +242,15 @@ fn small_roll_response(tag: &str, pipeline: Option<&str>) {
         "SPH response peaks at {:.4} sigma_1",
         sph_peak / sigma1
     );
+    if let Some(bound) = vertex_bound {
+        assert!(
+            (sph_peak / linear_peak - 1.0).abs() < bound,
+            "SPH vertex {:.4} sigma_1 against linear theory's {:.4}: {:+.2} %",
+            sph_peak / sigma1,
+            linear_peak / sigma1,
+            100.0 * (sph_peak / linear_peak - 1.0)
+        );
+    }
 
     // Off resonance (|sigma/sigma_1 - 1| = 0.3, outside docs/analytic.md's +-0.15 band):
     // amplitude within 10 % of linear theory for the same motion, start and fit window

@@ -12,6 +12,11 @@ use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 use std::path::Path;
 
+/// The shortest period or ramp [s] a motion accepts: below it 1/T^2 in the
+/// acceleration overflows towards infinity (a period of 1e-320 s made the tank's
+/// acceleration infinite), and no flow resolves it anyway.
+pub const SHORTEST_TIME: f64 = 1e-6;
+
 /// A harmonic component `amplitude sin(2 pi t / period + phase)`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

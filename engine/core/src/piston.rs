@@ -5,7 +5,8 @@
 //! kinematics ([`crate::kinematics`]) moves it independently of the tank, ghost walls
 //! mirror across it with its velocity, and a probe finds it by its component.
 
-use crate::motion::{HarmonicSpec, Motion, MotionSeries, MotionSpec};
+use crate::motion::{HarmonicSpec, Motion, MotionSeries, MotionSpec, SHORTEST_TIME};
+use crate::units::shown;
 use crate::units::Positive;
 use glam::DVec2;
 use serde::{Deserialize, Serialize};
@@ -73,11 +74,25 @@ impl PistonSpec {
         if !stroke.is_finite() || !self.phase.is_finite() {
             return Err(("stroke", "stroke and phase must be finite numbers".into()));
         }
+        if period.0 < SHORTEST_TIME {
+            return Err((
+                "period",
+                format!(
+                    "{} s is out of range; accepted: seconds from {}",
+                    shown(period.0),
+                    shown(SHORTEST_TIME)
+                ),
+            ));
+        }
         let ramp = self.ramp.unwrap_or(2.0 * period.0);
-        if !(ramp >= 0.0 && ramp.is_finite()) {
+        if !(ramp == 0.0 || (ramp >= SHORTEST_TIME && ramp.is_finite())) {
             return Err((
                 "ramp",
-                format!("{ramp} is out of range; accepted: seconds >= 0"),
+                format!(
+                    "{} is out of range; accepted: 0 (no ramp) or seconds from {}",
+                    shown(ramp),
+                    shown(SHORTEST_TIME)
+                ),
             ));
         }
         let spec = MotionSpec {

@@ -4,6 +4,17 @@
 use serde::de::{self, Deserializer};
 use serde::{Deserialize, Serialize};
 
+/// A number as an error message shows it: as written between 1e-4 and 1e6 in
+/// magnitude (and 0), in exponent form beyond, so 1e-320 does not print as 320 digits.
+pub fn shown(x: f64) -> String {
+    let m = x.abs();
+    if x == 0.0 || !x.is_finite() || (1e-4..1e6).contains(&m) {
+        format!("{x}")
+    } else {
+        format!("{x:e}")
+    }
+}
+
 /// A number that must be > 0.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 #[serde(transparent)]

@@ -37,6 +37,9 @@ pub struct RunOptions {
     pub checkpoint_every: Option<f64>,
     /// Stop once the simulated time reaches this [s], writing a checkpoint.
     pub stop_at: Option<f64>,
+    /// Stop after this many steps (from the start or the resume), with no checkpoint:
+    /// a short look at a scenario (the fuzzer's runs). The status says so.
+    pub max_steps: Option<u64>,
     /// Continue from this checkpoint ([`sph_core::checkpoint::read_latest`]); the scenario
     /// must be the one it was written for.
     pub resume: Option<Checkpoint>,
@@ -309,6 +312,7 @@ fn run_in_pool(
     let start = Instant::now();
     let mut failure = None;
     let mut paused = None;
+    let mut limited = false;
     'steps: while sim.clock.time < sim.clock.end_time * (1.0 - 1e-12) {
         let step = sim.clock.step;
         // The step span holds the stage spans only (the profile's stage rows).
@@ -353,6 +357,14 @@ fn run_in_pool(
             );
         }
         let done = sim.clock.time >= sim.clock.end_time * (1.0 - 1e-12);
+        if !done
+            && opts
+                .max_steps
+                .is_some_and(|n| sim.clock.step - start_step >= n)
+        {
+            limited = true;
+            break;
+        }
         if done || !sim.clock.step.is_multiple_of(period) {
             continue;
         }
@@ -403,6 +415,12 @@ fn run_in_pool(
         );
         // Keep the offending state for inspection; a failure here must not hide the first.
         let _ = write_fluid_frame(&sim, &out.join("unstable.vtp"));
+    } else if limited {
+        summary.status = format!(
+            "stopped after {} steps (max_steps), t = {:.6} s",
+            sim.clock.step - start_step,
+            sim.clock.time
+        );
     } else if let Some(how) = paused {
         summary.status = format!(
             "{how} at step {}, t = {:.6} s, with a checkpoint: continue with `engine resume {}`",

@@ -17,13 +17,13 @@ use sph_core::components::{BodyPose, Density, Position, Pressure, Velocity, Wall
 use sph_core::components::{Fluid, Mass, ParticleId, PressureSensor, Tank, WaveGauge};
 use sph_core::contract::{Access, Breach};
 use sph_core::kernel::KernelKind;
-use sph_core::motion::{Motion, MotionSeries, MotionSpec, Pose};
+use sph_core::motion::{Motion, MotionSeries, MotionSpec, Pose, SHORTEST_TIME};
 use sph_core::piston::{Piston, PistonSpec, PISTON_WALL};
 use sph_core::registry::ron_options;
 use sph_core::registry::{camel_case, did_you_mean, snake_case, StageRegistry};
 use sph_core::sim::{Clock, Constants, Resources, Sim, Tait};
 use sph_core::stage::Stage;
-use sph_core::units::Positive;
+use sph_core::units::{shown, Positive};
 use std::cell::{Cell, RefCell};
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -926,6 +926,39 @@ fn validate(spec: ScenarioSpec, at: &Locator, source: PathBuf) -> Result<Scenari
             ),
         ));
     }
+    // The Tait equation p = B ((rho/rho_0)^gamma - 1): gamma from the gas-like 1 to
+    // beyond water's 7, and a stiffness B = rho_0 c_0^2 / gamma that is a number (a
+    // density or sound speed near the largest float made it infinite, and the
+    // pressures NaN).
+    let fluid_place = |key: &str| {
+        at.doc
+            .key(&["fluid", key])
+            .or_else(|| at.doc.key(&["fluid"]))
+    };
+    let gamma = spec.fluid.gamma.0;
+    if !(1.0..=20.0).contains(&gamma) {
+        return Err(at.error(
+            "gamma",
+            fluid_place("gamma"),
+            format!(
+                "{} is out of range; accepted: 1 to 20 (7 for water)",
+                shown(gamma)
+            ),
+        ));
+    }
+    let stiffness = spec.fluid.density.0 * sound_speed * sound_speed / gamma;
+    if !(stiffness.is_finite() && stiffness > 0.0) {
+        return Err(at.error(
+            "sound_speed",
+            fluid_place("sound_speed"),
+            format!(
+                "density {} kg/m^3 and sound speed {} m/s give the Tait stiffness rho_0 c_0^2 / gamma = {} Pa; accepted: a finite, positive stiffness (water: 998 kg/m^3, 10-100 m/s)",
+                shown(spec.fluid.density.0),
+                shown(sound_speed),
+                shown(stiffness)
+            ),
+        ));
+    }
     let motion = match spec
         .tank
         .as_ref()
@@ -1300,11 +1333,15 @@ fn motion(
         None => None,
     };
     if let Some(r) = m.ramp {
-        if !(r >= 0.0 && r.is_finite()) {
+        if !(r == 0.0 || (r >= SHORTEST_TIME && r.is_finite())) {
             return Err(at.error(
                 "ramp",
                 place("ramp"),
-                format!("{r} is out of range; accepted: seconds >= 0"),
+                format!(
+                    "{} is out of range; accepted: 0 (no ramp) or seconds from {}",
+                    shown(r),
+                    shown(SHORTEST_TIME)
+                ),
             ));
         }
     }
@@ -1316,6 +1353,21 @@ fn motion(
                 key,
                 place(key),
                 "amplitude and phase must be finite numbers".into(),
+            ));
+        }
+        if let Some(period) = h
+            .as_ref()
+            .map(|h| h.period.0)
+            .filter(|p| *p < SHORTEST_TIME)
+        {
+            return Err(at.error(
+                key,
+                place(key),
+                format!(
+                    "period {} s is out of range; accepted: seconds from {}",
+                    shown(period),
+                    shown(SHORTEST_TIME)
+                ),
             ));
         }
     }
