@@ -277,3 +277,76 @@ fn an_unstable_run_stops_with_its_diagnostic_and_keeps_earlier_checkpoints() {
     }
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// A run killed (SIGKILL) while it writes checkpoints every few steps leaves a whole
+/// checkpoint, from which `engine resume` finishes the run; a run killed that writes
+/// no checkpoint leaves the folder's earlier checkpoints byte for byte.
+#[test]
+fn a_killed_run_leaves_whole_checkpoints_and_resumes() {
+    let out = temp("killed");
+    let dam = shipped("dam_break.ron").display().to_string();
+    let dir = out.display().to_string();
+    let coarse = [
+        "--set",
+        "resolution=ParticlesAcross(30)",
+        "--threads",
+        "1",
+        "-q",
+    ];
+    let spawn = |extra: &[&str]| {
+        let mut args = vec![&dam[..], "--out", &dir, "--set", "end_time=1.5"];
+        args.extend(extra);
+        args.extend(coarse);
+        Command::new(ENGINE)
+            .args(&args)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .expect("the engine binary runs")
+    };
+    let checkpoint = out.join("checkpoint.bin");
+    // Checkpoints every 0.01 s of simulated time (a few dozen steps): killed once the
+    // third has been written, most likely in the middle of a step or a write.
+    let mut child = spawn(&["--checkpoint-every", "0.01"]);
+    let started = std::time::Instant::now();
+    let mut seen = Vec::new();
+    while seen.len() < 3 {
+        assert!(
+            started.elapsed().as_secs() < 60,
+            "no checkpoints within a minute"
+        );
+        if let Ok(m) = std::fs::metadata(&checkpoint).and_then(|m| m.modified()) {
+            if seen.last() != Some(&m) {
+                seen.push(m);
+            }
+        }
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    child.kill().expect("kill");
+    let status = child.wait().expect("wait");
+    assert!(!status.success(), "the run ended before it was killed");
+    let o = engine(&["resume", &dir, "--threads", "1", "-q"], &[]);
+    assert!(o.status.success(), "resume after a kill: {}", stderr(&o));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["status"], "completed", "{summary}");
+    assert!((summary["simulated_time"].as_f64().unwrap() - 1.5).abs() < 1e-9);
+
+    // A second run into the same folder, with no checkpoints of its own, killed.
+    let kept: Vec<(&str, Vec<u8>)> = ["checkpoint.bin", "checkpoint.prev.bin"]
+        .into_iter()
+        .filter_map(|f| std::fs::read(out.join(f)).ok().map(|b| (f, b)))
+        .collect();
+    assert!(!kept.is_empty());
+    let mut child = spawn(&[]);
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    child.kill().expect("kill");
+    let _ = child.wait();
+    for (f, bytes) in kept {
+        assert!(
+            std::fs::read(out.join(f)).unwrap() == bytes,
+            "{f} changed under the killed run"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&out);
+}
