@@ -350,3 +350,43 @@ fn a_killed_run_leaves_whole_checkpoints_and_resumes() {
     }
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// A full disk, as /dev/full stands for one: the run into a folder that holds an
+/// earlier run's outputs and checkpoint stops with an error naming the file it could
+/// not write and why, and exit code 1; the earlier checkpoint is left byte for byte.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_full_disk_stops_the_run_with_the_file_and_keeps_the_earlier_checkpoint() {
+    let out = temp("full_disk");
+    let dam = shipped("dam_break.ron").display().to_string();
+    let dir = out.display().to_string();
+    let run = |end: &str, extra: &[&str]| {
+        let mut args = vec![&dam[..], "--out", &dir, "--set", end];
+        args.extend([
+            "--set",
+            "resolution=ParticlesAcross(30)",
+            "--threads",
+            "1",
+            "-q",
+        ]);
+        args.extend(extra);
+        engine(&args, &[])
+    };
+    let o = run("end_time=0.2", &["--checkpoint-every", "0.1"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let kept = std::fs::read(out.join("checkpoint.bin")).expect("checkpoint.bin");
+    std::fs::remove_file(out.join("probes.csv")).unwrap();
+    std::os::unix::fs::symlink("/dev/full", out.join("probes.csv")).unwrap();
+    let o = run("end_time=0.3", &[]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("probes.csv") && err.contains("No space left on device"),
+        "{err}"
+    );
+    assert!(
+        std::fs::read(out.join("checkpoint.bin")).unwrap() == kept,
+        "checkpoint.bin changed under the failed run"
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}
