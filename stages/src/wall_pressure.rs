@@ -57,6 +57,11 @@ pub enum Slip {
 pub struct Params {
     /// Default FreeSlip.
     pub slip: Slip,
+    /// Let the fluid leave the wall: where the fluid near a wall particle moves away
+    /// from the wall, continuity and the pressures read the wall particle moving with
+    /// it along the normal, so the wall does not stretch (and pull back) fluid that
+    /// separates. Default false.
+    pub separation: bool,
 }
 
 pub fn register(registry: &mut StageRegistry) {
@@ -66,6 +71,7 @@ pub fn register(registry: &mut StageRegistry) {
         |p: Params| {
             Ok(WallPressure {
                 slip: p.slip,
+                separation: p.separation,
                 sums: Vec::new(),
             })
         },
@@ -83,6 +89,7 @@ struct Sums {
 
 pub struct WallPressure {
     slip: Slip,
+    separation: bool,
     sums: Vec<Sums>,
 }
 
@@ -174,7 +181,7 @@ impl Stage for WallPressure {
         let (eos, g) = (c.eos, c.gravity);
         let mut gp = column_mut::<Pressure>(ghost)?;
         let mut gr = column_mut::<Density>(ghost)?;
-        let gv = column::<Velocity>(ghost)?;
+        let mut gv = column_mut::<Velocity>(ghost)?;
         let mut viscous = sim.resources.take::<NoSlipVelocities>().unwrap_or_default();
         viscous.velocity.clear();
         viscous.velocity.extend(gv.iter().map(|v| v.0));
@@ -201,6 +208,10 @@ impl Stage for WallPressure {
                     Slip::NoSlip => 2.0 * v_b - u,
                     Slip::WallVelocity => v_b,
                 };
+                if self.separation {
+                    let n = wall.normal();
+                    gv[k].0 = v_b + (u - v_b).dot(n).max(0.0) * n;
+                }
             } else {
                 gp[k].0 = 0.0;
             }
