@@ -116,5 +116,73 @@ mod tests {
         assert!((f[0] + 0.005).abs() < 1e-15 && (f[4] - 0.005).abs() < 1e-15);
         assert_eq!(face_offsets(1.0, 0.01).len(), 17);
         assert_eq!(face_offsets(f64::NAN, 0.01), vec![0.0]);
+        // No spacing (or a negative one): the centre alone.
+        assert_eq!(face_offsets(0.01, 0.0), vec![0.0]);
+        assert_eq!(face_offsets(0.01, -0.01), vec![0.0]);
+        // A quarter spacing apart: diameter 0.75 over ds/4 = 0.125 is 6 intervals, 7
+        // points, equally spaced by diameter/6 and symmetric about 0 (binary
+        // fractions: exact but for the round-off of k/6, below 1e-15 here).
+        let f = face_offsets(0.75, 0.5);
+        assert_eq!(f.len(), 7);
+        for (k, x) in f.iter().enumerate() {
+            let want = -0.375 + 0.125 * k as f64;
+            assert!((x - want).abs() < 1e-15, "point {k}: {x} vs {want}");
+        }
+        // Small faces still take 3 points.
+        assert_eq!(face_offsets(0.001, 0.01), vec![-0.0005, 0.0, 0.0005]);
+    }
+
+    /// The weighted mean by hand: each reading weighs the time since the one before
+    /// it, the first nothing (exact in binary: the weights and readings are small
+    /// whole numbers and halves).
+    #[test]
+    fn the_box_filter_weighs_each_reading_by_its_interval() {
+        let mut f = BoxFilter::new(10.0);
+        assert_eq!(f.mean(), 0.0, "no readings");
+        f.push(0.0, 1.0);
+        assert_eq!(f.mean(), 1.0, "one reading, weight 0: the plain mean");
+        f.push(1.0, 3.0);
+        f.push(3.0, 5.0);
+        // Weights 0, 1, 2: (0 * 1 + 1 * 3 + 2 * 5) / 3.
+        assert_eq!(f.mean(), 13.0 / 3.0);
+        // Readings at one time weigh nothing: their plain mean.
+        let mut same = BoxFilter::new(1.0);
+        same.push(2.0, 1.0);
+        same.push(2.0, 4.0);
+        assert_eq!(same.mean(), 2.5);
+    }
+
+    /// A reading exactly `window` old stays in the window; an older one leaves it.
+    #[test]
+    fn the_box_filter_keeps_the_readings_of_its_window() {
+        let mut f = BoxFilter::new(1.0);
+        f.push(0.0, 8.0);
+        f.push(1.0, 2.0);
+        f.push(2.0, 4.0);
+        // t = 0 left (older than 2 - 1); t = 1 (weight 1) and t = 2 (weight 1) remain.
+        assert_eq!(f.readings().count(), 2);
+        assert_eq!(f.mean(), 3.0);
+        f.push(3.5, 6.0);
+        // Only t = 3.5 remains, with weight 1.5.
+        assert_eq!(f.readings().collect::<Vec<_>>(), vec![(3.5, 1.5, 6.0)]);
+        assert_eq!(f.mean(), 6.0);
+    }
+
+    /// A checkpoint's readings restore the same filter, which then goes on alike.
+    #[test]
+    fn a_restored_box_filter_is_the_one_saved() {
+        let mut f = BoxFilter::new(0.75);
+        for (t, r) in [(0.0, -1.0), (0.25, 2.0), (0.5, 7.0), (0.625, -3.0)] {
+            f.push(t, r);
+        }
+        let saved: Vec<_> = f.readings().collect();
+        assert_eq!(saved.len(), 4);
+        let mut g = BoxFilter::new(0.75);
+        g.restore(saved);
+        assert_eq!(g, f);
+        f.push(0.875, 1.0);
+        g.push(0.875, 1.0);
+        assert_eq!(g, f);
+        assert_eq!(g.mean(), f.mean());
     }
 }

@@ -283,6 +283,28 @@ mod tests {
         }
     }
 
+    /// The runtime-chosen `dw_dr` (cold code: probes, setup, tests) is the slope of the
+    /// runtime-chosen `w`: a central difference of `w` with e = 1e-7 h (truncation
+    /// O(e^2), round-off O(eps W / e), both far below 1e-5 of the peak slope), away from
+    /// the cubic's kink at R = 1 and the support edge.
+    #[test]
+    fn the_runtime_slope_is_the_derivative_of_the_runtime_kernel() {
+        let h = 0.05;
+        for kind in KernelKind::ALL {
+            let e = 1e-7 * h;
+            let scale = dw_dr(kind, h, 0.9 * h).abs();
+            assert!(scale > 1.0, "{kind:?}: slope scale {scale}");
+            for r in [0.3 * h, 0.7 * h, 1.3 * h, 1.8 * h] {
+                let fd = (w(kind, h, r + e) - w(kind, h, r - e)) / (2.0 * e);
+                assert!(
+                    (fd - dw_dr(kind, h, r)).abs() < 1e-5 * scale,
+                    "{kind:?} r = {r}: dw_dr {} against the difference {fd}",
+                    dw_dr(kind, h, r)
+                );
+            }
+        }
+    }
+
     #[test]
     fn gradient_is_antisymmetric_and_matches_finite_differences() {
         let h = 0.02;

@@ -528,3 +528,159 @@ fn riemann_diffusion_leaves_hydrostatic_water_at_rest() {
         );
     }
 }
+
+/// The standard terms written out as plain loops over the pairs from the formulas at
+/// the head of their files, for particle `i` of `world`: (dv_i/dt, d rho_i/dt, P_i) of
+/// the term list `text` names (one of those matched below). `p/rho^2` and the
+/// pressures are the packed ones, the sound speed the equation of state's.
+fn standard_by_hand(text: &str, world: &hecs::World, i: usize) -> (DVec2, f64, f64) {
+    let eos = constants().eos;
+    let s = states(world);
+    let (xi, vi, rhoi, _, pi) = s[i];
+    let k = Wendland::new(H);
+    let (mut acc, mut drho, mut power) = (DVec2::ZERO, 0.0, 0.0);
+    for (j, &(xj, vj, rhoj, mj, pj)) in s.iter().enumerate() {
+        let (x, v) = (xi - xj, vi - vj);
+        let r = x.length();
+        if j == i || r >= k.support() {
+            continue;
+        }
+        let grad = x / r * sph_core::kernel::dw_dr(KernelKind::Wendland, H, r);
+        let (pi2, pj2) = (pi / (rhoi * rhoi), pj / (rhoj * rhoj));
+        let eta2 = 0.01 * H * H;
+        match text {
+            // dv_i/dt = - sum_j m_j (p_i/rho_i^2 + p_j/rho_j^2) grad_i W_ij.
+            "[PressureGradient()]" => acc -= mj * (pi2 + pj2) * grad,
+            // d rho_i/dt = sum_j m_j v_ij . grad_i W_ij.
+            "[Continuity()]" => drho += mj * v.dot(grad),
+            // Monaghan: Pi_ij = (-alpha cbar phi + beta phi^2) / rhobar for v.x < 0.
+            "[ArtificialViscosity(alpha: 0.1, beta: 0.0)]"
+            | "[ArtificialViscosity(alpha: 0.1, beta: 2.0)]" => {
+                let beta = if text.contains("2.0") { 2.0 } else { 0.0 };
+                if v.dot(x) < 0.0 {
+                    let phi = H * v.dot(x) / (r * r + eta2);
+                    let cbar = 0.5 * (eos.sound_speed(rhoi) + eos.sound_speed(rhoj));
+                    let pi_ij = (-0.1 * cbar * phi + beta * phi * phi) / (0.5 * (rhoi + rhoj));
+                    acc -= mj * pi_ij * grad;
+                    power += mj * pi_ij * v.dot(grad);
+                }
+            }
+            // Monaghan (2000): R_ij f_ij^n with f_ij = W(r)/W(ds); eps over the
+            // negative pressures' |p|/rho^2, eps_+ over both when both are positive.
+            "[ArtificialPressure(epsilon: 0.2, epsilon_positive: 0.01, exponent: 4)]"
+            | "[ArtificialPressure(epsilon: 0.2, epsilon_positive: 0.01, exponent: 3)]" => {
+                let n = if text.contains("exponent: 4") { 4 } else { 3 };
+                let f = (k.w(r) / k.w(DS)).powi(n);
+                let r_ij = if pi > 0.0 && pj > 0.0 {
+                    0.01 * (pi2 + pj2)
+                } else {
+                    0.2 * (pi2.min(0.0).abs() + pj2.min(0.0).abs())
+                };
+                acc -= mj * r_ij * f * grad;
+            }
+            // Morris, Fox & Zhu: K_ij = m_j (mu_i + mu_j)/(rho_i rho_j) x.grad W /
+            // (r^2 + eta^2), dv_i/dt = sum_j K_ij v_ij, P_i = - sum_j K_ij |v_ij|^2.
+            "[LaminarViscosity(nu: 0.001)]" => {
+                let mu = RHO0 * 0.001;
+                let kij = mj * 2.0 * mu / (rhoi * rhoj) * x.dot(grad) / (r * r + eta2);
+                acc += kij * v;
+                power -= kij * v.length_squared();
+            }
+            _ => panic!("no plain loop for {text}"),
+        }
+    }
+    (acc, drho, power)
+}
+
+/// Each standard term sums what its formula says (a plain loop over the pairs,
+/// relative 1e-12 of the sum's scale: round-off of the same pairs added in another
+/// order), on every instruction set, on the jittered lattice with ghosts, random
+/// densities (pressures of both signs) and velocities; the viscous terms dissipate
+/// (P_i >= 0 and somewhere > 0).
+#[test]
+fn standard_terms_sum_what_their_formulas_write() {
+    let world = jittered_world();
+    let s = states(&world);
+    assert!(s.iter().any(|t| t.4 < 0.0) && s.iter().any(|t| t.4 > 0.0));
+    for text in [
+        "[PressureGradient()]",
+        "[Continuity()]",
+        "[ArtificialViscosity(alpha: 0.1, beta: 0.0)]",
+        "[ArtificialViscosity(alpha: 0.1, beta: 2.0)]",
+        "[ArtificialPressure(epsilon: 0.2, epsilon_positive: 0.01, exponent: 4)]",
+        "[ArtificialPressure(epsilon: 0.2, epsilon_positive: 0.01, exponent: 3)]",
+        "[LaminarViscosity(nu: 0.001)]",
+    ] {
+        let mut dissipated = 0.0;
+        for i in [11, 20, 70, 100, 130] {
+            let (acc, drho, power) = standard_by_hand(text, &world, i);
+            let m_i = s[i].3;
+            assert!(power >= 0.0, "{text}, particle {i}: P_i = {power}");
+            dissipated += power;
+            for isa in std::iter::once(Isa::SCALAR).chain(Isa::available()) {
+                let got = sums_of(text, &world, i, isa);
+                let close = |a: f64, b: f64, scale: f64| (a - b).abs() <= 1e-12 * scale.max(1e-300);
+                assert!(
+                    close(got.acc.x, acc.x, acc.length())
+                        && close(got.acc.y, acc.y, acc.length())
+                        && close(got.drho, drho, drho.abs())
+                        && close(got.power, 0.5 * m_i * power, 0.5 * m_i * power.abs())
+                        && got.diffusion == 0.0,
+                    "{text}, particle {i} on {}: {got:?} against acc {acc}, d rho/dt {drho}, P_i {power}",
+                    isa.name()
+                );
+            }
+            // Every term gives something here, so a sum of zeros does not pass.
+            assert!(
+                acc.length() + drho.abs() > 0.0,
+                "{text}, particle {i}: nothing"
+            );
+        }
+        if text.contains("Viscosity") {
+            assert!(dissipated > 0.0, "{text}: no dissipation");
+        }
+    }
+}
+
+/// Each term refuses parameters out of its documented range, naming the field, and
+/// takes the ends of the range.
+#[test]
+fn term_parameters_out_of_range_are_refused() {
+    let check = |text: &str| {
+        let specs: Vec<TermSpec> = sph_core::registry::ron_options().from_str(text).unwrap();
+        RateTerms::check(&specs)
+    };
+    for (text, field) in [
+        ("[ArtificialViscosity(alpha: -0.01)]", "alpha"),
+        ("[ArtificialViscosity(beta: -1.0)]", "beta"),
+        ("[ArtificialViscosity(alpha: inf)]", "alpha"),
+        ("[RiemannPressure(limiter: -0.5)]", "limiter"),
+        ("[RiemannPressure(limiter: 100.5)]", "limiter"),
+        ("[RiemannPressure(limiter: NaN)]", "limiter"),
+        ("[LaminarViscosity(nu: -1e-6)]", "nu"),
+        ("[ArtificialPressure(epsilon: -0.2)]", "epsilon"),
+        (
+            "[ArtificialPressure(epsilon_positive: -0.1)]",
+            "epsilon_positive",
+        ),
+        ("[ArtificialPressure(exponent: 0)]", "exponent"),
+        ("[ArtificialPressure(exponent: 13)]", "exponent"),
+        ("[Continuity(), MolteniColagrossi(delta: 1.5)]", "delta"),
+        ("[Continuity(), DeltaSph(delta: -0.1)]", "delta"),
+    ] {
+        let e = check(text).expect_err(text);
+        assert!(e.contains(&format!("`{field}`")), "{text}: {e}");
+    }
+    for text in [
+        "[ArtificialViscosity(alpha: 0.0, beta: 0.0)]",
+        "[RiemannPressure(limiter: 0.0)]",
+        "[RiemannPressure(limiter: 100.0)]",
+        "[LaminarViscosity(nu: 0.0)]",
+        "[ArtificialPressure(epsilon: 0.0, epsilon_positive: 0.0, exponent: 1)]",
+        "[ArtificialPressure(exponent: 12)]",
+        "[Continuity(), DeltaSph(delta: 1.0)]",
+        "[Continuity(), MolteniColagrossi(delta: 0.0)]",
+    ] {
+        assert!(check(text).is_ok(), "{text}: {:?}", check(text));
+    }
+}
