@@ -136,3 +136,14 @@ mod tests {
         }
     }
 }
+
+/// Asserts that no particle was reflected back through a wall during the run (and so
+/// none crossed one: without the reflection the run would have stopped).
+pub fn assert_no_wall_reflections(summary: &Summary) {
+    assert_eq!(
+        summary.diagnostics.get("wall_reflections"),
+        None,
+        "{:?}",
+        summary.diagnostics
+    );
+}

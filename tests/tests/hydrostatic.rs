@@ -4,7 +4,7 @@
 
 use sph_core::components::{Position, Pressure};
 use sph_core::world::Particles;
-use sph_tests::support::{load, nan_max, run_completed, series};
+use sph_tests::support::{assert_no_wall_reflections, load, nan_max, run_completed, series};
 
 const SCENE: &str = include_str!("../../scenarios/hydrostatic.ron");
 
@@ -68,12 +68,7 @@ fn hydrostatic_tank_holds_its_pressure_and_its_particles() {
 
     // No particle reached a wall: none was reflected (and none crossed, or the run
     // would have stopped).
-    assert_eq!(
-        summary.diagnostics.get("wall_reflections"),
-        None,
-        "{:?}",
-        summary.diagnostics
-    );
+    assert_no_wall_reflections(&summary);
 
     // Every particle below the surface layer (two kernel supports deep) within 2 % of
     // rho_0 g H of the hydrostatic pressure: docs/analytic.md's suggested tolerance for
@@ -160,12 +155,7 @@ fn a_still_tank_on_wall_particles_reads_hydrostatic_pressure_at_every_sensor() {
     assert!(text.contains("WallParticles()") && text.contains("WallPressure()"));
     let scenario = load(&text, "scenarios/hydrostatic.ron", STILL_TANK);
     let (summary, _sim, out) = run_completed(scenario, "hydrostatic_wall_particles", 2);
-    assert_eq!(
-        summary.diagnostics.get("wall_reflections"),
-        None,
-        "{:?}",
-        summary.diagnostics
-    );
+    assert_no_wall_reflections(&summary);
     // 1 %: the acceptance for still water (issue 27), as for the mirrored walls;
     // measured 0.59 % at worst (0.52-0.59 % at the corner sensors). The fluid's
     // starting lattice is in balance with the mirrors' push, not exactly with the wall

@@ -31,6 +31,17 @@ fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
+/// The arguments of a coarse dam break (450 particles) on `threads` threads, quiet.
+fn coarse_dam(threads: &str) -> [&str; 5] {
+    [
+        "--set",
+        "resolution=ParticlesAcross(30)",
+        "--threads",
+        threads,
+        "-q",
+    ]
+}
+
 /// A coarse, short dam break that writes next to nothing.
 fn short_run(out: &Path) -> Vec<String> {
     let mut args: Vec<String> = vec![
@@ -223,13 +234,7 @@ fn an_unstable_run_stops_with_its_diagnostic_and_keeps_earlier_checkpoints() {
     let out = temp("unstable");
     let dam = shipped("dam_break.ron").display().to_string();
     let dir = out.display().to_string();
-    let coarse = [
-        "--set",
-        "resolution=ParticlesAcross(30)",
-        "--threads",
-        "2",
-        "-q",
-    ];
+    let coarse = coarse_dam("2");
     let mut first = vec![&dam[..], "--out", &dir, "--set", "end_time=0.3"];
     first.extend(["--checkpoint-every", "0.1"]);
     first.extend(coarse);
@@ -286,13 +291,7 @@ fn a_killed_run_leaves_whole_checkpoints_and_resumes() {
     let out = temp("killed");
     let dam = shipped("dam_break.ron").display().to_string();
     let dir = out.display().to_string();
-    let coarse = [
-        "--set",
-        "resolution=ParticlesAcross(30)",
-        "--threads",
-        "1",
-        "-q",
-    ];
+    let coarse = coarse_dam("1");
     let spawn = |extra: &[&str]| {
         let mut args = vec![&dam[..], "--out", &dir, "--set", "end_time=1.5"];
         args.extend(extra);
@@ -362,13 +361,7 @@ fn a_full_disk_stops_the_run_with_the_file_and_keeps_the_earlier_checkpoint() {
     let dir = out.display().to_string();
     let run = |end: &str, extra: &[&str]| {
         let mut args = vec![&dam[..], "--out", &dir, "--set", end];
-        args.extend([
-            "--set",
-            "resolution=ParticlesAcross(30)",
-            "--threads",
-            "1",
-            "-q",
-        ]);
+        args.extend(coarse_dam("1"));
         args.extend(extra);
         engine(&args, &[])
     };

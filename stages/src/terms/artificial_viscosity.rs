@@ -69,10 +69,7 @@ impl Term for ArtificialViscosity {
 
 impl RateTerm for ArtificialViscosity {
     fn reads(&self) -> Fields {
-        match self.shear {
-            true => <Self as Term>::READS.with(Fields::SHEAR),
-            false => <Self as Term>::READS,
-        }
+        super::with_wall_shear(<Self as Term>::READS, self.shear)
     }
     const USES_COEF: bool = true;
     #[inline(always)]

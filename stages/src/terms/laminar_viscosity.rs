@@ -55,10 +55,7 @@ impl Term for LaminarViscosity {
 
 impl RateTerm for LaminarViscosity {
     fn reads(&self) -> Fields {
-        match self.shear {
-            true => <Self as Term>::READS.with(Fields::SHEAR),
-            false => <Self as Term>::READS,
-        }
+        super::with_wall_shear(<Self as Term>::READS, self.shear)
     }
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {

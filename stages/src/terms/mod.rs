@@ -52,6 +52,15 @@ pub trait Term: RateTerm + Sized {
     fn wall_shear(&mut self) {}
 }
 
+/// A viscous term's reads: `base`, and the ghosts' no-slip velocities when it reads
+/// them ([`Term::wall_shear`]).
+pub(crate) fn with_wall_shear(base: Fields, shear: bool) -> Fields {
+    match shear {
+        true => base.with(Fields::SHEAR),
+        false => base,
+    }
+}
+
 /// Checks that every `(field, value)` is a finite number >= 0.
 pub(crate) fn check_non_negative(fields: &[(&str, f64)]) -> Result<(), String> {
     for &(field, v) in fields {
