@@ -105,6 +105,17 @@ pub fn surge_front(out: &Path, a: f64) -> Vec<(f64, f64)> {
     front
 }
 
+/// Asserts that no particle was reflected back through a wall during the run (and so
+/// none crossed one: without the reflection the run would have stopped).
+pub fn assert_no_wall_reflections(summary: &Summary) {
+    assert_eq!(
+        summary.diagnostics.get("wall_reflections"),
+        None,
+        "{:?}",
+        summary.diagnostics
+    );
+}
+
 #[cfg(test)]
 mod tests {
     use super::{nan_max, nan_min};
@@ -135,15 +146,4 @@ mod tests {
             );
         }
     }
-}
-
-/// Asserts that no particle was reflected back through a wall during the run (and so
-/// none crossed one: without the reflection the run would have stopped).
-pub fn assert_no_wall_reflections(summary: &Summary) {
-    assert_eq!(
-        summary.diagnostics.get("wall_reflections"),
-        None,
-        "{:?}",
-        summary.diagnostics
-    );
 }
