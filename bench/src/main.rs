@@ -252,8 +252,11 @@ fn peer(args: &PeerArgs) -> Result<(), String> {
         scenario: args.scenario.clone(),
         sets: Vec::new(),
         out: args.out.clone(),
+        isa: Vec::new(),
         child: None,
     };
+    // The instruction set this process would use (the environment's choice).
+    let isa = engine::bench::detected_isa();
     let mut table = format!(
         "| particles | ds [mm] | engine | steps | solver iterations per step (density + divergence) | wall to t [s] | wall ratio (salva2d / ours) | mean front error | at the last data point | mean front error, gate delay {GATE_DELAY} | at the last data point, gate delay |\n|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
@@ -270,7 +273,7 @@ fn peer(args: &PeerArgs) -> Result<(), String> {
             steps: 0,
             end_time: args.end_time,
         };
-        let ours: Measurement = run_child(case, &bench, &overrides, &format!("peer-{size}"))?;
+        let ours: Measurement = run_child(case, &bench, &overrides, isa, &format!("peer-{size}"))?;
         eprintln!(
             "ours: {} particles to t = {} s in {:.2} s ({} steps)",
             ours.particles, ours.simulated_time, ours.wall_seconds, ours.steps
@@ -289,6 +292,7 @@ fn peer(args: &PeerArgs) -> Result<(), String> {
             case,
             &dfsph_bench,
             &overrides,
+            isa,
             &format!("peer-dfsph-{size}"),
         )?;
         eprintln!(

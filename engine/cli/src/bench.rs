@@ -10,6 +10,7 @@
 
 use serde::{Deserialize, Serialize};
 use sph_core::components::{Fluid, Position};
+use sph_core::pair::Isa;
 use sph_core::sim::Sim;
 use sph_core::stage::{Stage, StepError};
 use sph_core::vocab::Neighbours;
@@ -90,9 +91,70 @@ pub struct BenchArgs {
     /// Folder for bench.csv and bench.md.
     #[arg(long, default_value = "out/bench")]
     pub out: PathBuf,
+    /// Instruction sets to run every fixed-step case on, interleaved within each
+    /// repeat (so a noisy host loads them alike): `auto`, every SIMD set this
+    /// processor has, widest first (AVX-512 and AVX2 on a host with both, so one bench
+    /// compares them); or a list of `avx512`, `avx2`, `scalar`. The fixed-time runs use
+    /// the first.
+    #[arg(long, value_delimiter = ',', default_value = "auto")]
+    pub isa: Vec<String>,
     /// Internal: run one case in this process and print its result as JSON.
     #[arg(long, hide = true)]
     pub child: Option<String>,
+}
+
+/// The instruction sets `--isa` asks for, checked against this processor's.
+fn requested_isas(asked: &[String]) -> Result<Vec<&'static str>, String> {
+    let available: Vec<&'static str> = Isa::available().iter().map(|i| i.name()).collect();
+    let mut isas: Vec<&'static str> = Vec::new();
+    for name in asked.iter().map(|s| s.trim()) {
+        let found = match name {
+            "auto" if available.is_empty() => vec!["scalar"],
+            "auto" => available.clone(),
+            "scalar" => vec!["scalar"],
+            _ => match available.iter().find(|a| **a == name) {
+                Some(a) => vec![*a],
+                None => {
+                    return Err(format!(
+                        "--isa: `{name}` is not an instruction set this processor runs; \
+                         accepted: auto, {}scalar",
+                        available
+                            .iter()
+                            .map(|a| format!("{a}, "))
+                            .collect::<String>()
+                    ))
+                }
+            },
+        };
+        for isa in found {
+            if !isas.contains(&isa) {
+                isas.push(isa);
+            }
+        }
+    }
+    if isas.is_empty() {
+        return Err("--isa: give at least one instruction set (or auto)".into());
+    }
+    Ok(isas)
+}
+
+/// The instruction set this process runs its pair sums on (the environment's choice:
+/// `SPH_NO_SIMD`, `SPH_SIMD`).
+pub fn detected_isa() -> &'static str {
+    Isa::detect().name()
+}
+
+/// The processor's model name (from /proc/cpuinfo), or "unknown processor".
+fn processor() -> String {
+    std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|info| {
+            info.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split_once(':'))
+                .map(|(_, v)| v.trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown processor".into())
 }
 
 /// One run's measurements (what a child process prints).
@@ -132,6 +194,9 @@ pub struct Measurement {
     /// summary.json's diagnostics (the DFSPH solves' iteration counts among them).
     #[serde(default)]
     pub diagnostics: std::collections::BTreeMap<String, f64>,
+    /// The instruction set the pair sums ran on (`scalar`, `avx2`, `avx512`).
+    #[serde(default)]
+    pub isa: String,
 }
 
 impl Measurement {
@@ -154,8 +219,8 @@ impl Measurement {
             .stages
             .iter()
             .filter(|s| s.0 == stage)
-            .map(|s| s.1)
-            .sum();
+            // From +0: an empty f64 sum is -0, which the tables would print as "-0.0".
+            .fold(0.0, |sum, s| sum + s.1);
         100.0 * s / total.max(1e-300)
     }
 }
@@ -338,6 +403,7 @@ pub fn run_case(
         interactions: pairs as f64 * summary.steps as f64,
         rebuild_interval,
         pairs_kept,
+        isa: detected_isa().into(),
         stages: summary
             .stages
             .iter()
@@ -398,11 +464,14 @@ fn front_series(path: &Path) -> Vec<(f64, f64)> {
         .collect()
 }
 
-/// Runs one case in a child process (the current executable with `bench --child`).
+/// Runs one case in a child process (the current executable with `bench --child`),
+/// with `extra` overrides after `args.sets`, on instruction set `isa` (`avx512`,
+/// `avx2` or `scalar`; [`detected_isa`] for the one this process would use).
 pub fn run_child(
     case: Case,
     args: &BenchArgs,
     extra: &[&str],
+    isa: &str,
     tag: &str,
 ) -> Result<Measurement, String> {
     let exe = std::env::current_exe().map_err(|e| e.to_string())?;
@@ -423,12 +492,25 @@ pub fn run_child(
     {
         cmd.arg(format!("--set={s}"));
     }
+    // The child picks its instruction set from these (`Isa::detect`).
+    cmd.env_remove("SPH_SIMD").env_remove("SPH_NO_SIMD");
+    match isa {
+        "avx2" => cmd.env("SPH_SIMD", "avx2"),
+        "scalar" => cmd.env("SPH_NO_SIMD", "1"),
+        _ => &mut cmd,
+    };
     let output = cmd.output().map_err(|e| e.to_string())?;
     let _ = std::fs::remove_dir_all(&out);
     let stdout = String::from_utf8_lossy(&output.stdout);
     let line = stdout.lines().rev().find(|l| l.starts_with('{'));
     match (output.status.success(), line) {
-        (true, Some(line)) => serde_json::from_str(line).map_err(|e| e.to_string()),
+        (true, Some(line)) => {
+            let m: Measurement = serde_json::from_str(line).map_err(|e| e.to_string())?;
+            match m.isa == isa {
+                true => Ok(m),
+                false => Err(format!("{tag}: asked for {isa}, the run used {}", m.isa)),
+            }
+        }
         _ => Err(format!(
             "{tag}: {}",
             String::from_utf8_lossy(&output.stderr).trim()
@@ -481,11 +563,12 @@ pub fn bench(args: &BenchArgs) -> Result<(Vec<Measurement>, Vec<Measurement>), S
     if args.threads.contains(&0) || args.threads.is_empty() {
         return Err("--threads: give counts >= 1".into());
     }
+    let isas = requested_isas(&args.isa)?;
     std::fs::create_dir_all(&args.out).map_err(|e| e.to_string())?;
     let mut fixed = Vec::new();
     for &n in &sizes {
         for &t in &args.threads {
-            let mut runs = Vec::new();
+            let mut runs: Vec<Vec<Measurement>> = vec![Vec::new(); isas.len()];
             for r in 0..args.repeats.max(1) {
                 let case = Case {
                     particles: n,
@@ -493,17 +576,20 @@ pub fn bench(args: &BenchArgs) -> Result<(Vec<Measurement>, Vec<Measurement>), S
                     steps: args.steps,
                     end_time: 0.0,
                 };
-                let m = run_child(case, args, &[], &format!("{}-{t}t-{r}", label(n)))?;
-                eprintln!(
-                    "{:>6} particles, {t} thread(s), run {}: {:.2} s, {:.3e} particle-steps/s",
-                    m.particles,
-                    r + 1,
-                    m.wall_seconds,
-                    m.particle_steps_per_second()
-                );
-                runs.push(m);
+                for (k, isa) in isas.iter().enumerate() {
+                    let tag = format!("{}-{t}t-{isa}-{r}", label(n));
+                    let m = run_child(case, args, &[], isa, &tag)?;
+                    eprintln!(
+                        "{:>6} particles, {t} thread(s), {isa}, run {}: {:.2} s, {:.3e} particle-steps/s",
+                        m.particles,
+                        r + 1,
+                        m.wall_seconds,
+                        m.particle_steps_per_second()
+                    );
+                    runs[k].push(m);
+                }
             }
-            fixed.push(median(runs));
+            fixed.extend(runs.into_iter().map(median));
         }
     }
     let mut timed = Vec::new();
@@ -515,7 +601,7 @@ pub fn bench(args: &BenchArgs) -> Result<(Vec<Measurement>, Vec<Measurement>), S
             steps: 0,
             end_time: args.end_time,
         };
-        let m = run_child(case, args, &[], &format!("{}-to-t", label(n)))?;
+        let m = run_child(case, args, &[], isas[0], &format!("{}-to-t", label(n)))?;
         eprintln!(
             "{:>6} particles to t = {} s: {:.2} s wall, {} steps",
             m.particles, m.simulated_time, m.wall_seconds, m.steps
@@ -540,12 +626,12 @@ pub fn bench(args: &BenchArgs) -> Result<(Vec<Measurement>, Vec<Measurement>), S
 fn efficiency(m: &Measurement, all: &[Measurement]) -> Option<f64> {
     let one = all
         .iter()
-        .find(|o| o.particles == m.particles && o.threads == 1)?;
+        .find(|o| o.particles == m.particles && o.threads == 1 && o.isa == m.isa)?;
     Some(m.particle_steps_per_second() / (m.threads as f64 * one.particle_steps_per_second()))
 }
 
 fn csv_table(fixed: &[Measurement], timed: &[Measurement]) -> String {
-    let mut out = String::from("kind,particles,threads,steps,simulated_time_s,wall_s,particle_steps_per_s,interactions_per_s,ghosts_mean,peak_rss_mib,rss_bytes_per_particle_peak,heap_bytes_per_particle_peak,heap_bytes_per_particle_steady,parallel_efficiency,rebuild_interval_steps,pairs_kept_per_tested");
+    let mut out = String::from("kind,particles,threads,steps,simulated_time_s,wall_s,particle_steps_per_s,interactions_per_s,ghosts_mean,peak_rss_mib,rss_bytes_per_particle_peak,heap_bytes_per_particle_peak,heap_bytes_per_particle_steady,parallel_efficiency,rebuild_interval_steps,pairs_kept_per_tested,isa");
     for s in SHOWN.iter().chain(OUTPUTS.iter()) {
         let _ = write!(out, ",{s}_pct");
     }
@@ -571,6 +657,7 @@ fn csv_table(fixed: &[Measurement], timed: &[Measurement]) -> String {
                 m.rebuild_interval,
                 m.pairs_kept,
             );
+            let _ = write!(out, ",{}", m.isa);
             for s in SHOWN.iter().chain(OUTPUTS.iter()) {
                 let _ = write!(out, ",{:.2}", m.share(s));
             }
@@ -582,20 +669,28 @@ fn csv_table(fixed: &[Measurement], timed: &[Measurement]) -> String {
 
 fn markdown(fixed: &[Measurement], timed: &[Measurement], args: &BenchArgs) -> String {
     let mut out = format!(
-        "# engine bench\n\n`{}`, {} steps per fixed-step run, median of {} run(s); outputs at the scenario's default rates. Machine: {} logical CPUs.\n\n",
+        "# engine bench\n\n`{}`, {} steps per fixed-step run, median of {} run(s); outputs at the scenario's default rates. Machine: {}, {} logical CPUs; instruction sets available: {}.\n\n",
         args.scenario.display(),
         args.steps,
         args.repeats.max(1),
-        std::thread::available_parallelism().map_or(0, |n| n.get())
+        processor(),
+        std::thread::available_parallelism().map_or(0, |n| n.get()),
+        Isa::available()
+            .iter()
+            .map(|i| i.name())
+            .chain(["scalar"])
+            .collect::<Vec<_>>()
+            .join(", ")
     );
-    out += "| particles | threads | steps | wall [s] | particle-steps/s | interactions/s | peak RSS [MiB] | B/particle: peak RSS | peak heap | heap while stepping | parallel eff. | list rebuild interval [steps] | pairs kept / tested |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+    out += "| particles | threads | instruction set | steps | wall [s] | particle-steps/s | interactions/s | peak RSS [MiB] | B/particle: peak RSS | peak heap | heap while stepping | parallel eff. | list rebuild interval [steps] | pairs kept / tested |\n|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
     for m in fixed {
         let eff = efficiency(m, fixed).map_or("-".into(), |e| format!("{:.0} %", 100.0 * e));
         let _ = writeln!(
             out,
-            "| {} | {} | {} | {:.2} | {:.3e} | {:.3e} | {:.0} | {:.0} | {:.0} | {:.0} | {eff} | {:.1} | {:.2} |",
+            "| {} | {} | {} | {} | {:.2} | {:.3e} | {:.3e} | {:.0} | {:.0} | {:.0} | {:.0} | {eff} | {:.1} | {:.2} |",
             m.particles,
             m.threads,
+            m.isa,
             m.steps,
             m.wall_seconds,
             m.particle_steps_per_second(),
@@ -608,17 +703,18 @@ fn markdown(fixed: &[Measurement], timed: &[Measurement], args: &BenchArgs) -> S
             m.pairs_kept
         );
     }
-    out += "\nPer-stage share of the step time [%]:\n\n| particles | threads |";
+    out += &isa_ratios(fixed);
+    out += "\nPer-stage share of the step time [%]:\n\n| particles | threads | instruction set |";
     for s in SHOWN {
         let _ = write!(out, " {s} |");
     }
-    out += " probes+outputs |\n|---:|---:|";
+    out += " probes+outputs |\n|---:|---:|---|";
     for _ in 0..=SHOWN.len() {
         out += "---:|";
     }
     out.push('\n');
     for m in fixed.iter().chain(timed) {
-        let _ = write!(out, "| {} | {} |", m.particles, m.threads);
+        let _ = write!(out, "| {} | {} | {} |", m.particles, m.threads, m.isa);
         for s in SHOWN {
             let _ = write!(out, " {:.1} |", m.share(s));
         }
@@ -643,6 +739,47 @@ fn markdown(fixed: &[Measurement], timed: &[Measurement], args: &BenchArgs) -> S
     out
 }
 
+/// With more than one instruction set, each one's speed over the first's at every
+/// size and thread count (medians of runs interleaved in time); empty otherwise.
+fn isa_ratios(fixed: &[Measurement]) -> String {
+    let mut isas: Vec<&str> = Vec::new();
+    for m in fixed {
+        if !isas.contains(&m.isa.as_str()) {
+            isas.push(&m.isa);
+        }
+    }
+    if isas.len() < 2 {
+        return String::new();
+    }
+    let mut out = format!(
+        "\nSpeed against {} (particle-steps/s, medians of interleaved runs):\n\n| particles | threads |",
+        isas[0]
+    );
+    for isa in &isas[1..] {
+        let _ = write!(out, " {isa} / {} |", isas[0]);
+    }
+    out += "\n|---:|---:|";
+    out += &"---:|".repeat(isas.len() - 1);
+    out.push('\n');
+    for first in fixed.iter().filter(|m| m.isa == isas[0]) {
+        let _ = write!(out, "| {} | {} |", first.particles, first.threads);
+        for isa in &isas[1..] {
+            let other = fixed.iter().find(|m| {
+                m.isa == *isa && m.particles == first.particles && m.threads == first.threads
+            });
+            match other {
+                Some(o) => {
+                    let r = o.particle_steps_per_second() / first.particle_steps_per_second();
+                    let _ = write!(out, " {r:.2} |");
+                }
+                None => out += " - |",
+            }
+        }
+        out.push('\n');
+    }
+    out
+}
+
 /// Entry point of `engine bench`.
 pub fn main(args: &BenchArgs) -> Result<(), String> {
     bench(args).map(|_| ())
@@ -651,6 +788,45 @@ pub fn main(args: &BenchArgs) -> Result<(), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `auto` is every SIMD set, widest first (or scalar); names are checked and
+    /// repeats dropped.
+    #[test]
+    fn instruction_sets_are_checked() {
+        let auto = requested_isas(&["auto".into()]).unwrap();
+        let available: Vec<_> = Isa::available().iter().map(|i| i.name()).collect();
+        match available.is_empty() {
+            true => assert_eq!(auto, ["scalar"]),
+            false => assert_eq!(auto, available),
+        }
+        let two = requested_isas(&["scalar".into(), "scalar".into()]).unwrap();
+        assert_eq!(two, ["scalar"]);
+        let err = requested_isas(&["sse".into()]).unwrap_err();
+        assert!(err.contains("`sse`") && err.contains("scalar"), "{err}");
+        assert!(requested_isas(&[]).is_err());
+    }
+
+    /// The ratio table divides each set's speed by the first's, at the same size and
+    /// thread count.
+    #[test]
+    fn instruction_sets_are_compared_as_ratios() {
+        let m = |isa: &str, threads: usize, wall: f64| Measurement {
+            particles: 1000,
+            threads,
+            steps: 100,
+            wall_seconds: wall,
+            isa: isa.into(),
+            ..Default::default()
+        };
+        let fixed = [m("avx512", 1, 1.0), m("avx2", 1, 2.0), m("avx512", 2, 1.0)];
+        // A stage the run did not have takes no share, printed as 0.0, not -0.0.
+        assert_eq!(fixed[0].share("reinitialise").to_bits(), 0f64.to_bits());
+        let table = isa_ratios(&fixed);
+        assert!(table.contains("| avx2 / avx512 |"), "{table}");
+        assert!(table.contains("| 1000 | 1 | 0.50 |"), "{table}");
+        assert!(table.contains("| 1000 | 2 | - |"), "{table}");
+        assert_eq!(isa_ratios(&fixed[..1]), "");
+    }
 
     #[test]
     fn counts_parse_with_suffixes() {

@@ -19,6 +19,8 @@ fn bench_writes_a_row_per_case() {
             "1,2",
             "--steps",
             "5",
+            "--isa",
+            "scalar",
         ])
         .args(["--time-sizes", "none", "--scenario"])
         .arg(&scenario)
@@ -36,6 +38,33 @@ fn bench_writes_a_row_per_case() {
         assert_eq!(cells[3], "5", "{row}");
         let speed: f64 = cells[6].parse().unwrap();
         assert!(speed.is_finite() && speed > 0.0, "{row}");
+        // The child ran the instruction set asked for.
+        assert_eq!(cells[16], "scalar", "{row}");
     }
+    let md = std::fs::read_to_string(out.join("bench.md")).unwrap();
+    assert!(
+        md.contains("Machine: ") && md.contains("| scalar |"),
+        "{md}"
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+/// An instruction set the processor lacks, or a made-up one, is refused before any run,
+/// with what is accepted.
+#[test]
+fn bench_refuses_an_unknown_instruction_set() {
+    let out = std::env::temp_dir().join(format!("engine-bench-isa-{}", std::process::id()));
+    let output = Command::new(env!("CARGO_BIN_EXE_engine"))
+        .args(["bench", "--sizes", "800", "--isa", "avx9", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    let err = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        err.contains("--isa") && err.contains("`avx9`") && err.contains("accepted: auto"),
+        "{err}"
+    );
+    assert!(!out.join("bench.csv").exists());
     let _ = std::fs::remove_dir_all(&out);
 }
