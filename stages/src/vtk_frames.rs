@@ -10,7 +10,7 @@ use sph_core::contract::Access;
 use sph_core::series::check_samples;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{WallPose, Walls};
+use sph_core::vocab::{Guarded, WallPose, Walls};
 use sph_core::StageRegistry;
 use sph_output::frame::write_fluid_frame;
 use sph_output::vtk::{write_segments_vtp, PvdIndex};
@@ -170,5 +170,6 @@ impl Stage for VtkFrames {
             .reads::<Pressure>()
             .reads::<WallPose>()
             .uses::<NeighbourCount>()
+            .uses::<Guarded>()
     }
 }

@@ -274,6 +274,12 @@ fn an_unstable_run_stops_with_its_diagnostic_and_keeps_earlier_checkpoints() {
         "unstable.vtp: {}",
         &vtp[..200]
     );
+    // Each particle's id, and which guards have acted on it, to find it in ParaView.
+    assert!(
+        vtp.contains("Name=\"particle_id\"") && vtp.contains("Name=\"guarded\""),
+        "unstable.vtp: {}",
+        &vtp[..vtp.len().min(2000)]
+    );
     for (f, bytes) in kept {
         assert!(
             std::fs::read(out.join(f)).unwrap() == bytes,

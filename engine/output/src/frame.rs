@@ -6,11 +6,13 @@ use sph_core::components::{
 };
 use sph_core::sim::Sim;
 use sph_core::stage::StepError;
+use sph_core::vocab::Guarded;
 use sph_core::world::{archetype, column};
 use std::path::Path;
 
-/// Writes the fluid particles (position, velocity, density, pressure, `particle_id`
-/// and, where the neighbour grid stage counts them, neighbour count) to a `.vtp` file,
+/// Writes the fluid particles (position, velocity, density, pressure, `particle_id`,
+/// `guarded` (the [`Guarded`] flags: 1 floored, 2 reflected at a wall, 3 both) and,
+/// where the neighbour grid stage counts them, neighbour count) to a `.vtp` file,
 /// atomically.
 pub fn write_fluid_frame(sim: &Sim, path: &Path) -> Result<(), StepError> {
     let Some(arch) = archetype::<Fluid>(&sim.world) else {
@@ -27,14 +29,22 @@ pub fn write_fluid_frame(sim: &Sim, path: &Path) -> Result<(), StepError> {
         .get::<&ParticleId>()
         .map(|c| c.iter().map(|id| f64::from(id.0)).collect())
         .unwrap_or_default();
-    let extras = [("particle_id", &ids[..])];
+    // Which safeguards have acted on each particle, to find them in ParaView.
+    let guarded: Vec<f64> = arch
+        .get::<&Guarded>()
+        .map(|c| c.iter().map(|g| f64::from(g.0)).collect())
+        .unwrap_or_default();
+    let extras: Vec<(&str, &[f64])> = [("particle_id", &ids[..]), ("guarded", &guarded[..])]
+        .into_iter()
+        .filter(|(_, v)| !v.is_empty())
+        .collect();
     let fields = FrameFields {
         positions: Position::values(&pos),
         velocity: Velocity::values(&vel),
         density: Density::values(&rho),
         pressure: Pressure::values(&p),
         neighbours: neighbours.as_deref().map_or(&[], NeighbourCount::values),
-        extra_scalars: if ids.is_empty() { &[] } else { &extras },
+        extra_scalars: &extras,
     };
     write_vtp(path, &fields).map_err(|e| StepError::output(path, e))
 }
