@@ -2,10 +2,11 @@
 //! re-initialisation"), by the Shepard filter
 //!   rho_i = sum_j m_j W_ij / sum_j (m_j/rho_j) W_ij   (j over fluid, ghosts and i itself)
 //! or the first-order MLS filter ([`crate::mls`]), which keeps a linear (hydrostatic)
-//! density field and so does not lift a free surface when run often.
+//! density field and so does not lift a free surface when run often, or the density
+//! summation with SPHinXsys's free-surface correction ([`FreeSurfaceDensity`]).
 //! Run it every N steps with the stage's `every: N`; leave the stage out for "never".
 
-use crate::terms::{mls::Mls, shepard::Shepard};
+use crate::terms::{free_surface_density::FreeSurfaceDensity, mls::Mls, shepard::Shepard};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::components::{Density, Ghost, Mass, Position};
@@ -27,6 +28,9 @@ pub enum Filter {
     Shepard,
     /// First-order moving least squares (exact for linear density fields).
     Mls,
+    /// sum m W, with the share a free surface cuts from the kernel put back
+    /// (SPHinXsys's free-surface density summation).
+    FreeSurface,
 }
 
 /// How often is the runner's `every: N` (default 1); the studied values are 1, 5, 20.
@@ -40,7 +44,7 @@ pub struct Params {
 pub fn register(registry: &mut StageRegistry) {
     registry.register(
         "reinitialise",
-        "Shepard or MLS density re-initialisation (use every: N)",
+        "Shepard, MLS or free-surface summation density re-initialisation (use every: N)",
         |p: Params| Ok(Reinitialise { filter: p.filter }),
     );
 }
@@ -66,6 +70,9 @@ impl Stage for Reinitialise {
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
         let _span = tracing::trace_span!("pair_sums").entered();
         let reads = Shepard { w0: 0.0 }.reads().with(Mls { w0: 0.0 }.reads());
+        let rho0 = sim.constants.eos.rho0;
+        let c = &sim.constants;
+        let inv_lattice_sum = 1.0 / sph_core::kernel::lattice_sum(c.kernel, c.h, c.spacing);
         // The sums read the densities packed before the pass, so each particle's new
         // density can go straight into its column (no second buffer).
         let filter = self.filter;
@@ -98,6 +105,18 @@ impl Stage for Reinitialise {
                     Filter::Mls => {
                         filter_all(&Mls { w0 }, k, records, nb, &mut rho, half.as_deref_mut())
                     }
+                    Filter::FreeSurface => filter_all(
+                        &FreeSurfaceDensity {
+                            w0,
+                            rho0,
+                            inv_lattice_sum,
+                        },
+                        k,
+                        records,
+                        nb,
+                        &mut rho,
+                        half.as_deref_mut(),
+                    ),
                 }
             })?;
             Ok(true)

@@ -399,11 +399,13 @@ fn a_dam_break_resumed_in_the_middle_of_a_neighbour_list_is_bit_identical() {
 
 /// Every pair-term scheme resumes bit for bit (issue 28): the coarse dam break of the
 /// test above with each density diffusion, Riemann-solver SPH (the shipped terms), the
-/// laminar viscosity, and particle shifting, stopped at 0.13 s and resumed on one
-/// thread, writes the probes and energy of the run never stopped.
+/// laminar viscosity, particle shifting, and fixed wall particles with the free-surface
+/// density summation every third step (so a stop falls between two), stopped at
+/// 0.13 s and resumed on one thread, writes the probes and energy of the run never
+/// stopped.
 #[test]
 fn every_scheme_resumes_bit_identical() {
-    let schemes: [(&str, &[&str]); 6] = [
+    let schemes: [(&str, &[&str]); 7] = [
         ("riemann", &[]),
         (
             "fourtakas",
@@ -427,6 +429,14 @@ fn every_scheme_resumes_bit_identical() {
                Forces(terms: [RiemannPressure(), Continuity(), RiemannDiffusion()]), \
                Probe(interval: 0.005, methods: [Shepard], plots: false), Integrate(courant: 0.25), \
                Shifting(), Energy(interval: 0.01, plots: false)]"],
+        ),
+        (
+            "wall-particles",
+            &["pipeline=[WallParticles(), NeighbourGrid(), Reinitialise(filter: FreeSurface, every: 3), Eos(), \
+               WallPressure(slip: WallVelocity, separation: true), \
+               Forces(terms: [RiemannPressure(), Continuity(), RiemannDiffusion()]), \
+               Probe(interval: 0.005, methods: [Shepard], plots: false), Integrate(courant: 0.25), \
+               Energy(interval: 0.01, plots: false)]"],
         ),
     ];
     for (name, sets) in schemes {

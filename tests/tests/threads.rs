@@ -57,6 +57,12 @@ shipped! {
         ["resolution=ParticlesAcross(60)", "end_time=0.6", "tank.motion.ramp=0.1", "pipeline.ghost_walls.slip=NoSlip"];
     dam_break_no_slip_is_deterministic: "dam_break.ron",
         ["resolution=ParticlesAcross(40)", "end_time=0.3", "pipeline.ghost_walls.slip=NoSlip"];
+    // Fixed wall particles with the extrapolated pressure (its sums run on one thread
+    // in fluid order) and the free-surface density summation, on fixed and rolling walls.
+    dam_break_wall_particles_is_deterministic: "dam_break.ron",
+        ["resolution=ParticlesAcross(40)", "end_time=0.3", "pipeline=[WallParticles(), NeighbourGrid(), Reinitialise(filter: FreeSurface), Eos(), WallPressure(slip: WallVelocity, separation: true), Forces(terms: [RiemannPressure(), Continuity(), RiemannDiffusion()]), Probe(interval: 0.005, methods: [Shepard, Nearest, Averaged]), Integrate(courant: 0.25), Energy(interval: 0.01), VtkFrames(), Snapshots(times: [])]"];
+    sloshing_wall_particles_is_deterministic: "sloshing.ron",
+        ["resolution=ParticlesAcross(60)", "end_time=0.4", "tank.motion.ramp=0.1", "pipeline=[WallParticles(), NeighbourGrid(), Reinitialise(filter: FreeSurface), Eos(), WallPressure(slip: NoSlip), Forces(terms: [RiemannPressure(), Continuity(), RiemannDiffusion()]), Probe(interval: 0.002, methods: [Shepard, Nearest, Averaged], roll_moment: true), Integrate(courant: 0.25), Energy(interval: 0.01), VtkFrames(), Snapshots(times: [])]"];
     sloshing_is_deterministic: "sloshing.ron",
         ["resolution=ParticlesAcross(60)", "end_time=0.4", "tank.motion.ramp=0.1"];
     sloshing_paper_is_deterministic: "sloshing_paper.ron",

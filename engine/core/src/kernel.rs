@@ -240,6 +240,30 @@ macro_rules! with_kernel {
     }};
 }
 
+/// The kernel summed over a square lattice of spacing `ds` centred on a node, times
+/// ds^2: sigma_0 ds^2, with sigma_0 = sum_k W(|k| ds) the reference number density of
+/// a full neighbourhood at rest (1.0105 for the Wendland kernel at h = 1.3 ds; it tends
+/// to the kernel's integral, 1, as h/ds grows). Beyond 1,000 spacings per support the
+/// lattice sum equals 1 to round-off and 1 is returned; NaN for a non-positive or
+/// non-finite `h` or `ds`.
+pub fn lattice_sum(kind: KernelKind, h: f64, ds: f64) -> f64 {
+    if !(h > 0.0 && ds > 0.0 && h.is_finite() && ds.is_finite()) {
+        return f64::NAN;
+    }
+    let reach = kind.support_factor() * h / ds;
+    if reach > 1000.0 {
+        return 1.0;
+    }
+    let n = reach.ceil() as i64;
+    let mut sum = 0.0;
+    for i in -n..=n {
+        for j in -n..=n {
+            sum += w(kind, h, (i as f64).hypot(j as f64) * ds);
+        }
+    }
+    sum * ds * ds
+}
+
 /// Evaluates W(r) for a runtime-chosen kernel (for cold code: probes, setup, tests).
 pub fn w(kind: KernelKind, h: f64, r: f64) -> f64 {
     with_kernel!(kind, h, |k| k.w(r))
@@ -270,6 +294,46 @@ mod tests {
             }
         }
         (s, g)
+    }
+
+    /// The lattice sum: Wendland at h = 1.3 ds by hand (its 21 nodes within 2h, by
+    /// distance), and the continuum's 1 as h/ds grows; no input panics.
+    #[test]
+    fn the_lattice_sum_is_the_rest_neighbourhood_s_number_density() {
+        let (h, ds) = (1.3, 1.0);
+        let by_hand: f64 = [
+            (0.0, 1.0),
+            (1.0, 4.0),
+            (2f64.sqrt(), 4.0),
+            (2.0, 4.0),
+            (5f64.sqrt(), 8.0),
+        ]
+        .iter()
+        .map(|&(r, count)| count * w(KernelKind::Wendland, h, r))
+        .sum();
+        let sum = lattice_sum(KernelKind::Wendland, h, ds);
+        assert!((sum - by_hand).abs() < 1e-14, "{sum} against {by_hand}");
+        assert!((sum - 1.0105).abs() < 1e-4, "{sum}");
+        // It depends on h/ds alone.
+        let scaled = lattice_sum(KernelKind::Wendland, 13.0, 10.0);
+        assert!((scaled - sum).abs() < 1e-12, "{scaled} against {sum}");
+        for kind in KernelKind::ALL {
+            let fine = lattice_sum(kind, 0.1, 0.005);
+            assert!((fine - 1.0).abs() < 1e-3, "{kind:?}: {fine}");
+        }
+        assert_eq!(lattice_sum(KernelKind::Wendland, 1.0, 1e-9), 1.0);
+        for (h, ds) in [
+            (0.0, 1.0),
+            (1.0, 0.0),
+            (f64::NAN, 1.0),
+            (1.0, f64::INFINITY),
+            (-1.0, 1.0),
+        ] {
+            assert!(
+                lattice_sum(KernelKind::Wendland, h, ds).is_nan(),
+                "{h} {ds}"
+            );
+        }
     }
 
     #[test]

@@ -5,7 +5,7 @@
 //! `Forces(terms: [...])` and run in one neighbour loop. A new one is a file here with
 //! its `Params` and a [`Term`] impl, and one line in the [`rate_terms!`] list below;
 //! the list fixes the order in which the terms of one pair are added, whatever the
-//! order the scenario names them in. The density filters ([`shepard`], [`mls`]) are
+//! order the scenario names them in. The density filters ([`shepard`], [`mls`], [`free_surface_density`]) are
 //! pair terms of their own, with their own accumulators.
 
 pub mod artificial_pressure;
@@ -15,6 +15,7 @@ pub mod delta_sph;
 pub mod dfsph_factor;
 pub mod diffusion;
 pub mod fourtakas;
+pub mod free_surface_density;
 pub mod laminar_viscosity;
 pub mod mls;
 pub mod molteni_colagrossi;
