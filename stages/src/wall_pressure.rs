@@ -5,7 +5,11 @@
 //!   p_w = [ sum_f p_f W_wf + (g - a_w) . sum_f rho_f (x_w - x_f) W_wf ] / sum_f W_wf
 //!
 //! over the fluid particles f within the kernel support of wall particle w, a_w the
-//! acceleration of the wall's body at x_w. The second sum carries the pressure
+//! acceleration of the wall's body at x_w. With `one_sided: true` each pair's
+//! acceleration term enters only where it raises the wall's pressure,
+//! max(0, (g - a_w) . (x_w - x_f)) rho_f W_wf, as in SPHinXsys's wall (Zhang, Hu &
+//! Adams 2017): a wall particle above the fluid beside it then reads the fluid's
+//! pressure, not less, and does not pull that fluid into the wall. The second sum carries the pressure
 //! gradient that the fluid's acceleration relative to the wall sets up (hydrostatic in
 //! still water), so that the wall pushes back what the fluid would push on fluid
 //! beyond it. The wall particle's density is the Tait density of p_w, so the
@@ -62,6 +66,10 @@ pub struct Params {
     /// it along the normal, so the wall does not stretch (and pull back) fluid that
     /// separates. Default false.
     pub separation: bool,
+    /// Add each fluid particle's acceleration term only where it raises the wall
+    /// particle's pressure (SPHinXsys's wall), so the wall beside and above a free
+    /// surface never pulls. Default false (Adami's eq. 27 as written).
+    pub one_sided: bool,
 }
 
 pub fn register(registry: &mut StageRegistry) {
@@ -72,24 +80,28 @@ pub fn register(registry: &mut StageRegistry) {
             Ok(WallPressure {
                 slip: p.slip,
                 separation: p.separation,
+                one_sided: p.one_sided,
                 sums: Vec::new(),
             })
         },
     );
 }
 
-/// Per wall particle: sum W, sum p W, sum rho (x_w - x_f) W, sum v W.
+/// Per wall particle: sum W, sum p W, sum rho (x_w - x_f) W, sum v W, and with
+/// `one_sided` sum max(0, (g - a_w) . rho (x_w - x_f)) W.
 #[derive(Clone, Copy, Default)]
 struct Sums {
     w: f64,
     pw: f64,
     rho_r: DVec2,
     vw: DVec2,
+    raised: f64,
 }
 
 pub struct WallPressure {
     slip: Slip,
     separation: bool,
+    one_sided: bool,
     sums: Vec<Sums>,
 }
 
@@ -142,7 +154,32 @@ impl Stage for WallPressure {
         }
         self.sums.clear();
         self.sums.resize(gx.len(), Sums::default());
+        // The few walls now, looked up by entity for each wall particle.
+        let walls: Vec<(hecs::Entity, WallPose)> = sim
+            .world
+            .query::<(hecs::Entity, &WallPose)>()
+            .iter()
+            .map(|(e, w)| (e, *w))
+            .collect();
+        let wall_of = |k: usize| -> Result<&WallPose, StepError> {
+            match walls.iter().find(|(e, _)| *e == gw[k].0) {
+                Some((_, wall)) => Ok(wall),
+                None => Err(StepError::Internal(format!(
+                    "wall particle {k} rides on a wall the world no longer holds"
+                ))),
+            }
+        };
         let c = &sim.constants;
+        let (eos, gravity) = (c.eos, c.gravity);
+        // g - a_w per wall particle, for the one-sided sum (zero where unused).
+        let mut pull = vec![DVec2::ZERO; gx.len()];
+        if self.one_sided {
+            for (k, pull) in pull.iter_mut().enumerate() {
+                if gs[k].is_wall_particle() {
+                    *pull = gravity - wall_of(k)?.body.acceleration_at(gx[k].0);
+                }
+            }
+        }
         let support = c.support();
         with_kernel!(c.kernel, c.h, |k| {
             for i in 0..n {
@@ -168,17 +205,10 @@ impl Stage for WallPressure {
                     s.pw += fp[i].0 * w;
                     s.rho_r += fr[i].0 * w * r;
                     s.vw += w * fv[i].0;
+                    s.raised += (pull[g].dot(r) * fr[i].0).max(0.0) * w;
                 }
             }
         });
-        // The few walls now, looked up by entity for each wall particle.
-        let walls: Vec<(hecs::Entity, WallPose)> = sim
-            .world
-            .query::<(hecs::Entity, &WallPose)>()
-            .iter()
-            .map(|(e, w)| (e, *w))
-            .collect();
-        let (eos, g) = (c.eos, c.gravity);
         let mut gp = column_mut::<Pressure>(ghost)?;
         let mut gr = column_mut::<Density>(ghost)?;
         let mut gv = column_mut::<Velocity>(ghost)?;
@@ -193,15 +223,13 @@ impl Stage for WallPressure {
             if !gs[k].is_wall_particle() {
                 continue;
             }
-            let Some((_, wall)) = walls.iter().find(|(e, _)| *e == gw[k].0) else {
-                return Err(StepError::Internal(format!(
-                    "wall particle {k} rides on a wall the world no longer holds"
-                )));
-            };
+            let wall = wall_of(k)?;
             if s.w > 0.0 {
                 let x = gx[k].0;
-                let a_w = wall.body.acceleration_at(x);
-                gp[k].0 = (s.pw + (g - a_w).dot(s.rho_r)) / s.w;
+                gp[k].0 = match self.one_sided {
+                    true => (s.pw + s.raised) / s.w,
+                    false => (s.pw + (gravity - wall.body.acceleration_at(x)).dot(s.rho_r)) / s.w,
+                };
                 let (v_b, u) = (wall.body.velocity_at(x), s.vw / s.w);
                 viscous.velocity[k] = match self.slip {
                     Slip::FreeSlip => v_b + (u - v_b).dot(wall.tangent()) * wall.tangent(),

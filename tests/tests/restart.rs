@@ -433,7 +433,7 @@ fn every_scheme_resumes_bit_identical() {
         (
             "wall-particles",
             &["pipeline=[WallParticles(), NeighbourGrid(), Reinitialise(filter: FreeSurface, every: 3), Eos(), \
-               WallPressure(slip: WallVelocity, separation: true), \
+               WallPressure(slip: WallVelocity, separation: true, one_sided: true), \
                Forces(terms: [RiemannPressure(), Continuity(), RiemannDiffusion()]), \
                Probe(interval: 0.005, methods: [Shepard], plots: false), Integrate(courant: 0.25), \
                Energy(interval: 0.01, plots: false)]"],

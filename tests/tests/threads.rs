@@ -62,7 +62,7 @@ shipped! {
     dam_break_wall_particles_is_deterministic: "dam_break.ron",
         ["resolution=ParticlesAcross(40)", "end_time=0.3", "pipeline=[WallParticles(), NeighbourGrid(), Reinitialise(filter: FreeSurface), Eos(), WallPressure(slip: WallVelocity, separation: true), Forces(terms: [RiemannPressure(), Continuity(), RiemannDiffusion()]), Probe(interval: 0.005, methods: [Shepard, Nearest, Averaged]), Integrate(courant: 0.25), Energy(interval: 0.01), VtkFrames(), Snapshots(times: [])]"];
     sloshing_wall_particles_is_deterministic: "sloshing.ron",
-        ["resolution=ParticlesAcross(60)", "end_time=0.4", "tank.motion.ramp=0.1", "pipeline=[WallParticles(), NeighbourGrid(), Reinitialise(filter: FreeSurface), Eos(), WallPressure(slip: NoSlip), Forces(terms: [RiemannPressure(), Continuity(), RiemannDiffusion()]), Probe(interval: 0.002, methods: [Shepard, Nearest, Averaged], roll_moment: true), Integrate(courant: 0.25), Energy(interval: 0.01), VtkFrames(), Snapshots(times: [])]"];
+        ["resolution=ParticlesAcross(60)", "end_time=0.4", "tank.motion.ramp=0.1", "pipeline=[WallParticles(), NeighbourGrid(), Reinitialise(filter: FreeSurface), Eos(), WallPressure(slip: NoSlip, one_sided: true), Forces(terms: [RiemannPressure(), Continuity(), RiemannDiffusion()]), Probe(interval: 0.002, methods: [Shepard, Nearest, Averaged], roll_moment: true), Integrate(courant: 0.25), Energy(interval: 0.01), VtkFrames(), Snapshots(times: [])]"];
     sloshing_is_deterministic: "sloshing.ron",
         ["resolution=ParticlesAcross(60)", "end_time=0.4", "tank.motion.ramp=0.1"];
     sloshing_paper_is_deterministic: "sloshing_paper.ron",
