@@ -181,6 +181,7 @@ fn a_still_tank_on_wall_particles_reads_hydrostatic_pressure_at_every_sensor() {
     // particles', and the acoustic ringing this sets off decays over about two seconds
     // (+1.1 % at the bottom at 1-1.5 s, +0.6 % at 2-2.5 s at H/ds 48), hence t > 2 s.
     every_sensor_within(&probes, 2.0, 0.01);
+    let _ = std::fs::remove_dir_all(probes.parent().expect("the run's folder"));
 }
 
 /// The free-surface density summation every step (`Reinitialise(filter:
@@ -199,6 +200,7 @@ fn a_still_tank_with_the_free_surface_summation_every_step_stays_hydrostatic() {
     // 1 %: the still-water acceptance (issue 27); measured 0.44 % at worst, as on the
     // mirrors without the filter (0.46 %).
     every_sensor_within(&probes, 2.0, 0.01);
+    let _ = std::fs::remove_dir_all(probes.parent().expect("the run's folder"));
 }
 
 /// The same on wall particles, with the one-sided wall pressure (`WallPressure(one_sided:
@@ -217,4 +219,5 @@ fn a_still_tank_on_one_sided_wall_particles_with_the_free_surface_summation_stay
     // 1 %: the still-water acceptance (issue 27); measured 0.89 % at worst (the side
     // sensor, Method I; 0.46-0.66 % elsewhere).
     every_sensor_within(&probes, 2.0, 0.01);
+    let _ = std::fs::remove_dir_all(probes.parent().expect("the run's folder"));
 }
