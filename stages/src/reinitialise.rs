@@ -45,12 +45,19 @@ pub fn register(registry: &mut StageRegistry) {
     registry.register(
         "reinitialise",
         "Shepard, MLS or free-surface summation density re-initialisation (use every: N)",
-        |p: Params| Ok(Reinitialise { filter: p.filter }),
+        |p: Params| {
+            Ok(Reinitialise {
+                filter: p.filter,
+                inv_lattice_sum: f64::NAN,
+            })
+        },
     );
 }
 
 pub struct Reinitialise {
     filter: Filter,
+    /// 1 / (sigma_0 ds^2) for the free-surface summation, from the run's kernel.
+    inv_lattice_sum: f64,
 }
 
 impl Stage for Reinitialise {
@@ -64,15 +71,15 @@ impl Stage for Reinitialise {
     }
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
+        let c = &sim.constants;
+        self.inv_lattice_sum = 1.0 / sph_core::kernel::lattice_sum(c.kernel, c.h, c.spacing);
         require_neighbours(sim, "reinitialise")
     }
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
         let _span = tracing::trace_span!("pair_sums").entered();
         let reads = Shepard { w0: 0.0 }.reads().with(Mls { w0: 0.0 }.reads());
-        let rho0 = sim.constants.eos.rho0;
-        let c = &sim.constants;
-        let inv_lattice_sum = 1.0 / sph_core::kernel::lattice_sum(c.kernel, c.h, c.spacing);
+        let (rho0, inv_lattice_sum) = (sim.constants.eos.rho0, self.inv_lattice_sum);
         // The sums read the densities packed before the pass, so each particle's new
         // density can go straight into its column (no second buffer).
         let filter = self.filter;

@@ -5,16 +5,16 @@
 //!   p_w = [ sum_f p_f W_wf + (g - a_w) . sum_f rho_f (x_w - x_f) W_wf ] / sum_f W_wf
 //!
 //! over the fluid particles f within the kernel support of wall particle w, a_w the
-//! acceleration of the wall's body at x_w. With `one_sided: true` each pair's
-//! acceleration term enters only where it raises the wall's pressure,
-//! max(0, (g - a_w) . (x_w - x_f)) rho_f W_wf, as in SPHinXsys's wall (Zhang, Hu &
-//! Adams 2017): a wall particle above the fluid beside it then reads the fluid's
-//! pressure, not less, and does not pull that fluid into the wall. The second sum carries the pressure
+//! acceleration of the wall's body at x_w. The second sum carries the pressure
 //! gradient that the fluid's acceleration relative to the wall sets up (hydrostatic in
 //! still water), so that the wall pushes back what the fluid would push on fluid
 //! beyond it. The wall particle's density is the Tait density of p_w, so the
 //! continuity and momentum pairs read one consistent state. A wall particle with no
 //! fluid within its support is seen by no fluid particle; it keeps p = 0, rho = rho_0.
+//! With `one_sided: true` each pair's acceleration term enters only where it raises
+//! the wall's pressure, max(0, (g - a_w) . (x_w - x_f)) rho_f W_wf, as in SPHinXsys's
+//! wall (Zhang, Hu & Adams 2017): a wall particle above the fluid beside it then reads
+//! that fluid's pressure, not less, and does not pull it into the wall.
 //!
 //! The wall particles move with their wall (`WallParticles`): continuity and the
 //! pressures read the wall's own velocity v_b, as Adami et al. prescribe (sec. 2.3),
@@ -82,6 +82,7 @@ pub fn register(registry: &mut StageRegistry) {
                 separation: p.separation,
                 one_sided: p.one_sided,
                 sums: Vec::new(),
+                pull: Vec::new(),
             })
         },
     );
@@ -103,6 +104,9 @@ pub struct WallPressure {
     separation: bool,
     one_sided: bool,
     sums: Vec<Sums>,
+    /// g - a_w per ghost, for the one-sided sums (zero elsewhere); kept between
+    /// steps only to reuse its allocation.
+    pull: Vec<DVec2>,
 }
 
 impl Stage for WallPressure {
@@ -171,8 +175,9 @@ impl Stage for WallPressure {
         };
         let c = &sim.constants;
         let (eos, gravity) = (c.eos, c.gravity);
-        // g - a_w per wall particle, for the one-sided sum (zero where unused).
-        let mut pull = vec![DVec2::ZERO; gx.len()];
+        let pull = &mut self.pull;
+        pull.clear();
+        pull.resize(gx.len(), DVec2::ZERO);
         if self.one_sided {
             for (k, pull) in pull.iter_mut().enumerate() {
                 if gs[k].is_wall_particle() {
