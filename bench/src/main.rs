@@ -131,7 +131,7 @@ enum SalvaStep {
     /// salva2d does not substep; particles then move up to about 2.8 ds per step.
     Fixed,
     /// dt = CFL x ds / max|v|, at most `MAX_DT`: the rule of our DFSPH pipeline
-    /// (stages/src/density_solve.rs) and the one salva2d's own disabled
+    /// (stages/src/solvers/density_solve.rs) and the one salva2d's own disabled
     /// `TimestepManager::max_substep` computes (0.4 x particle diameter / max speed).
     Cfl,
 }

@@ -8,33 +8,30 @@
 //! `Eos` gives pressures, `Continuity` and `Forces` the rates, `Probe` samples sensors,
 //! `Integrate` advances the state (`Shifting` may then regularise the positions), then `Energy`, `VtkFrames` and `Snapshots` report.
 
-pub mod advance;
-pub mod continuity;
-pub mod damping_zone;
-pub mod density_gradient;
-pub mod density_solve;
-pub mod dfsph_factor;
-pub mod divergence_solve;
-pub mod energy;
-pub mod eos;
-pub mod forces;
-pub mod ghost_walls;
-pub mod integrate;
-pub mod neighbour_grid;
-pub(crate) mod pressure_solve;
-pub mod probe;
-pub(crate) mod rates;
-pub mod reinitialise;
-pub mod scan;
-pub mod shifting;
-pub mod snapshots;
-pub mod sort_particles;
 pub mod terms;
-pub mod transducer;
-pub mod vtk_frames;
-pub mod wall_particles;
-pub mod wall_pressure;
-pub(crate) mod wall_work;
+
+pub mod neighbours;
+pub use neighbours::{neighbour_grid, scan, sort_particles};
+
+pub mod walls;
+pub(crate) use walls::wall_work;
+pub use walls::{ghost_walls, wall_particles, wall_pressure};
+
+pub mod equations;
+pub(crate) use equations::rates;
+pub use equations::{
+    continuity, damping_zone, density_gradient, eos, forces, reinitialise, shifting,
+};
+
+pub mod solvers;
+pub(crate) use solvers::pressure_solve;
+pub use solvers::{density_solve, dfsph_factor, divergence_solve};
+
+pub mod integration;
+pub use integration::{advance, integrate};
+
+pub mod outputs;
+pub use outputs::{energy, probe, snapshots, transducer, vtk_frames};
 
 use sph_core::StageRegistry;
 

@@ -82,7 +82,7 @@ impl Stage for Burst {
 
 fn registry() -> StageRegistry {
     let mut registry = sph_stages::standard_registry();
-    registry.register("burst", "test: radial velocity at step 0", |p: Params| {
+    registry.register_checked("burst", "test: radial velocity at step 0", |p: Params| {
         Ok(Burst { rate: p.rate })
     });
     registry

@@ -79,7 +79,7 @@ impl Stage for Burst {
 #[test]
 fn the_density_floor_is_reported_apart_from_the_flow() {
     let mut registry = sph_stages::standard_registry();
-    registry.register(
+    registry.register_checked(
         "burst",
         "test: radial velocity at step 0",
         |p: BurstParams| Ok(Burst(p)),

@@ -4,7 +4,7 @@
 //! temporary file falls back to the previous checkpoint; an unwritable output folder
 //! and absurd sizes are refused before the run with a message naming the culprit.
 
-use sph_core::checkpoint::{read_latest, LATEST, PREVIOUS, TEMPORARY};
+use sph_core::checkpoint::{read_latest, CheckpointError, LATEST, PREVIOUS, TEMPORARY};
 use sph_core::vocab::Neighbours;
 use sph_run::runner::{run, run_keeping_state, RunOptions};
 use sph_scenario::Scenario;
@@ -219,11 +219,22 @@ fn garbled_or_missing_checkpoints_are_reported() {
     let out = temp_out("restart-garbled");
     std::fs::create_dir_all(&out).unwrap();
     let err = read_latest(&out).unwrap_err();
-    assert!(err.contains("no checkpoint in"), "{err}");
+    assert!(
+        matches!(&err, CheckpointError::None { dir } if dir == &out),
+        "{err}"
+    );
+    assert!(err.to_string().contains("no checkpoint in"), "{err}");
     std::fs::write(out.join(LATEST), b"SPHCKPT\0 garbage garbage garbage").unwrap();
     let err = read_latest(&out).unwrap_err();
-    assert!(err.contains(LATEST) && err.contains("checksum"), "{err}");
-    assert!(err.contains("no previous checkpoint"), "{err}");
+    let CheckpointError::NoFallback(inner) = &err else {
+        panic!("{err}");
+    };
+    assert!(
+        matches!(&**inner, CheckpointError::File { path, message }
+            if path == &out.join(LATEST) && message.contains("checksum")),
+        "{err}"
+    );
+    assert!(err.to_string().contains("no previous checkpoint"), "{err}");
     let _ = std::fs::remove_dir_all(out);
 }
 

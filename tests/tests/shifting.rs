@@ -1,4 +1,4 @@
-//! Particle shifting (`Shifting`, stages/src/shifting.rs; docs/physics.md, "Particle
+//! Particle shifting (`Shifting`, stages/src/equations/shifting.rs; docs/physics.md, "Particle
 //! shifting"): it makes a disordered patch more uniform, it keeps a still free surface
 //! where it is (and would not without its free-surface detection), its results do not
 //! depend on the thread count, and bad parameters are refused at their place in the

@@ -205,7 +205,8 @@ pub fn resume(args: &ResumeArgs, registry: &StageRegistry) -> Result<ExitCode, S
             args.dir.display()
         ));
     }
-    let (checkpoint, notes) = sph_core::checkpoint::read_latest(&args.dir)?;
+    let (checkpoint, notes) =
+        sph_core::checkpoint::read_latest(&args.dir).map_err(|e| e.to_string())?;
     for note in notes {
         eprintln!("note: {note}");
     }

@@ -200,12 +200,38 @@ pub fn decode(mut bytes: Vec<u8>, file: &Path) -> Result<Checkpoint, StateError>
     })
 }
 
+/// A checkpoint that could not be written or read.
+#[derive(Clone, Debug, thiserror::Error)]
+pub enum CheckpointError {
+    /// A file could not be written, read or decoded.
+    #[error("{}: {message}", path.display())]
+    File { path: PathBuf, message: String },
+    #[error("{0}; and there is no previous checkpoint to fall back to")]
+    NoFallback(Box<CheckpointError>),
+    #[error("{latest}; and the previous checkpoint is unusable too: {previous}")]
+    BothUnusable {
+        latest: Box<CheckpointError>,
+        previous: Box<CheckpointError>,
+    },
+    #[error("no checkpoint in {} (run with --checkpoint-every SECONDS or --stop-at SECONDS, or stop a run with Ctrl-C)", dir.display())]
+    None { dir: PathBuf },
+}
+
+impl CheckpointError {
+    fn file(path: &Path, e: impl std::fmt::Display) -> Self {
+        Self::File {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        }
+    }
+}
+
 /// Writes a checkpoint into `dir`: to [`TEMPORARY`], synced, then the current
 /// [`LATEST`] becomes [`PREVIOUS`] and the new file takes its place. An error names the
 /// file and leaves the earlier checkpoints as they were.
-pub fn write(dir: &Path, bytes: &[u8]) -> Result<(), String> {
+pub fn write(dir: &Path, bytes: &[u8]) -> Result<(), CheckpointError> {
     let (tmp, latest) = (dir.join(TEMPORARY), dir.join(LATEST));
-    let named = |p: &Path, e: std::io::Error| format!("{}: {e}", p.display());
+    let named = |p: &Path, e: std::io::Error| CheckpointError::file(p, e);
     let written = fs::File::create(&tmp).and_then(|mut f| {
         f.write_all(bytes)?;
         f.sync_all()
@@ -229,7 +255,7 @@ pub fn write(dir: &Path, bytes: &[u8]) -> Result<(), String> {
 /// Reads the newest usable checkpoint in `dir`. Returns it with notes for the user: a
 /// leftover temporary file (removed), or a damaged newest checkpoint (renamed to
 /// `checkpoint.bin.damaged`) and the fallback to the previous one.
-pub fn read_latest(dir: &Path) -> Result<(Checkpoint, Vec<String>), String> {
+pub fn read_latest(dir: &Path) -> Result<(Checkpoint, Vec<String>), CheckpointError> {
     let mut notes = Vec::new();
     let tmp = dir.join(TEMPORARY);
     if tmp.exists() {
@@ -239,10 +265,10 @@ pub fn read_latest(dir: &Path) -> Result<(Checkpoint, Vec<String>), String> {
         ));
         let _ = fs::remove_file(&tmp);
     }
-    let read = |name: &str| -> Result<Checkpoint, String> {
+    let read = |name: &str| -> Result<Checkpoint, CheckpointError> {
         let path = dir.join(name);
-        let bytes = fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-        decode(bytes, &path).map_err(|e| format!("{}: {e}", path.display()))
+        let bytes = fs::read(&path).map_err(|e| CheckpointError::file(&path, e))?;
+        decode(bytes, &path).map_err(|e| CheckpointError::file(&path, e))
     };
     let latest = dir.join(LATEST);
     let first = if latest.exists() {
@@ -256,15 +282,17 @@ pub fn read_latest(dir: &Path) -> Result<(Checkpoint, Vec<String>), String> {
     let prev = dir.join(PREVIOUS);
     if !prev.exists() {
         return Err(match first {
-            Some(e) => format!("{e}; and there is no previous checkpoint to fall back to"),
-            None => format!(
-                "no checkpoint in {} (run with --checkpoint-every SECONDS or --stop-at SECONDS, or stop a run with Ctrl-C)",
-                dir.display()
-            ),
+            Some(e) => CheckpointError::NoFallback(Box::new(e)),
+            None => CheckpointError::None {
+                dir: dir.to_path_buf(),
+            },
         });
     }
     let c = read(PREVIOUS).map_err(|e2| match &first {
-        Some(e1) => format!("{e1}; and the previous checkpoint is unusable too: {e2}"),
+        Some(e1) => CheckpointError::BothUnusable {
+            latest: Box::new(e1.clone()),
+            previous: Box::new(e2),
+        },
         None => e2,
     })?;
     if let Some(e) = first {

@@ -23,6 +23,7 @@ pub mod registry;
 pub mod series;
 pub mod sim;
 pub mod stage;
+pub mod terms;
 pub mod units;
 pub mod vocab;
 pub mod walls;

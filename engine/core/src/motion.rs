@@ -143,19 +143,24 @@ pub struct MotionSeries {
 impl MotionSeries {
     /// Reads `time, angle[deg][, x, y]` rows (a tank), or with `positions` `time, x`
     /// rows (a piston's displacement [m]). Errors name the line.
-    pub fn read(path: &Path, positions: bool) -> Result<Self, String> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| format!("cannot read motion series {}: {e}", path.display()))?;
+    pub fn read(path: &Path, positions: bool) -> Result<Self, SeriesError> {
+        let text = std::fs::read_to_string(path).map_err(|e| SeriesError::Read {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
         let parsed = if positions {
             Self::parse_positions(&text)
         } else {
             Self::parse(&text)
         };
-        parsed.map_err(|e| format!("{}: {e}", path.display()))
+        parsed.map_err(|e| SeriesError::In {
+            path: path.to_path_buf(),
+            error: Box::new(e),
+        })
     }
 
     /// `time [s], x [m]` rows: a horizontal displacement, no rotation.
-    pub fn parse_positions(text: &str) -> Result<Self, String> {
+    pub fn parse_positions(text: &str) -> Result<Self, SeriesError> {
         let (t, rows) = parse_rows(text, &[2], "time [s], position [m]")?;
         let x = rows.iter().map(|r| r[1]).collect();
         Ok(Self {
@@ -165,7 +170,7 @@ impl MotionSeries {
     }
 
     /// `time [s], angle [deg][, x [m], y [m]]` rows.
-    pub fn parse(text: &str) -> Result<Self, String> {
+    pub fn parse(text: &str) -> Result<Self, SeriesError> {
         let (t, rows) = parse_rows(text, &[2, 4], "time [s], angle [deg][, x [m], y [m]]")?;
         let col = |k: usize| rows.iter().map(move |r| r.get(k).copied().unwrap_or(0.0));
         Ok(Self {
@@ -179,14 +184,47 @@ impl MotionSeries {
     }
 }
 
+/// A motion table refused: where, and what is accepted.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum SeriesError {
+    #[error("cannot read motion series {}: {message}", path.display())]
+    Read {
+        path: std::path::PathBuf,
+        message: String,
+    },
+    #[error("{}: {error}", path.display())]
+    In {
+        path: std::path::PathBuf,
+        error: Box<SeriesError>,
+    },
+    #[error("line {line}: `{text}` is not a row of numbers; accepted: {columns}")]
+    NotNumbers {
+        line: usize,
+        text: String,
+        columns: &'static str,
+    },
+    #[error("line {line}: {found} values; accepted: {columns} ({widths} finite numbers)")]
+    Width {
+        line: usize,
+        found: usize,
+        columns: &'static str,
+        /// The accepted counts, "2 or 4".
+        widths: String,
+    },
+    #[error("line {line}: time {time} does not increase")]
+    NotIncreasing { line: usize, time: f64 },
+    #[error("a motion series needs at least two rows")]
+    TooShort,
+}
+
 /// Numeric rows of a motion table with one of the `widths` (time first, strictly
 /// increasing); `#` comments and one header line allowed. Errors name the line and say
 /// what is accepted (`columns`).
 fn parse_rows(
     text: &str,
     widths: &[usize],
-    columns: &str,
-) -> Result<(Vec<f64>, Vec<Vec<f64>>), String> {
+    columns: &'static str,
+) -> Result<(Vec<f64>, Vec<Vec<f64>>), SeriesError> {
     let mut t = Vec::new();
     let mut rows = Vec::new();
     let mut header_seen = false;
@@ -205,35 +243,35 @@ fn parse_rows(
                 header_seen = true;
                 continue;
             }
-            return Err(format!(
-                "line {}: `{line}` is not a row of numbers; accepted: {columns}",
-                n + 1
-            ));
+            return Err(SeriesError::NotNumbers {
+                line: n + 1,
+                text: line.to_string(),
+                columns,
+            });
         };
         if !widths.contains(&numbers.len()) || numbers.iter().any(|v| !v.is_finite()) {
-            return Err(format!(
-                "line {}: {} values; accepted: {columns} ({} finite numbers)",
-                n + 1,
-                numbers.len(),
-                widths
+            return Err(SeriesError::Width {
+                line: n + 1,
+                found: numbers.len(),
+                columns,
+                widths: widths
                     .iter()
                     .map(|w| w.to_string())
                     .collect::<Vec<_>>()
-                    .join(" or ")
-            ));
+                    .join(" or "),
+            });
         }
         if t.last().is_some_and(|&last| numbers[0] <= last) {
-            return Err(format!(
-                "line {}: time {} does not increase",
-                n + 1,
-                numbers[0]
-            ));
+            return Err(SeriesError::NotIncreasing {
+                line: n + 1,
+                time: numbers[0],
+            });
         }
         t.push(numbers[0]);
         rows.push(numbers);
     }
     if t.len() < 2 {
-        return Err("a motion series needs at least two rows".into());
+        return Err(SeriesError::TooShort);
     }
     Ok((t, rows))
 }
@@ -479,14 +517,33 @@ mod tests {
     #[test]
     fn bad_series_rows_are_reported_by_line() {
         let e = MotionSeries::parse("t,a\n0,1\n1,x\n").unwrap_err();
-        assert!(e.contains("line 3"), "{e}");
+        assert!(matches!(e, SeriesError::NotNumbers { line: 3, .. }), "{e}");
         let e = MotionSeries::parse("0,1\n0,2\n").unwrap_err();
-        assert!(e.contains("does not increase"), "{e}");
+        assert_eq!(e, SeriesError::NotIncreasing { line: 2, time: 0.0 });
+        assert!(e.to_string().contains("does not increase"), "{e}");
         let e = MotionSeries::parse("0,1,2\n").unwrap_err();
-        assert!(e.contains("line 1") && e.contains("2 or 4"), "{e}");
-        assert!(MotionSeries::parse("0,1\n").is_err());
+        assert!(
+            matches!(&e, SeriesError::Width { line: 1, found: 3, widths, .. } if widths == "2 or 4"),
+            "{e}"
+        );
+        assert!(
+            e.to_string().contains("line 1") && e.to_string().contains("2 or 4"),
+            "{e}"
+        );
+        assert_eq!(MotionSeries::parse("0,1\n"), Err(SeriesError::TooShort));
         // A piston series takes exactly (time, position).
         let e = MotionSeries::parse_positions("0,0\n1,0.1,3\n").unwrap_err();
-        assert!(e.contains("line 2") && e.contains("position"), "{e}");
+        assert!(
+            matches!(
+                e,
+                SeriesError::Width {
+                    line: 2,
+                    found: 3,
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        assert!(e.to_string().contains("position"), "{e}");
     }
 }

@@ -61,7 +61,7 @@ impl PistonSpec {
                 ));
             }
             let path = source.parent().unwrap_or(Path::new(".")).join(file);
-            let series = MotionSeries::read(&path, true).map_err(|e| ("series", e))?;
+            let series = MotionSeries::read(&path, true).map_err(|e| ("series", e.to_string()))?;
             return Ok(Motion::new(&MotionSpec::default(), pivot, Some(series)));
         }
         let (Some(stroke), Some(period)) = (self.stroke, self.period) else {

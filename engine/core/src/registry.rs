@@ -3,6 +3,7 @@
 //! file's line and column. Plugins add stages with [`StageRegistry::register`].
 
 use crate::stage::Stage;
+use crate::terms::{Term, TermRegistry};
 use serde::de::DeserializeOwned;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -12,6 +13,7 @@ use std::sync::Arc;
 /// default filled in), as RON text for the run's resolved scenario copy.
 type Constructor = Box<
     dyn Fn(
+            &StageRegistry,
             &mut dyn erased_serde::Deserializer,
         ) -> Result<(Box<dyn Stage>, String), erased_serde::Error>
         + Send
@@ -53,6 +55,8 @@ impl ParamError {
 #[derive(Default, Clone)]
 pub struct StageRegistry {
     entries: BTreeMap<String, Arc<Entry>>,
+    /// The pair terms plugins add to `Forces(terms: [...])`.
+    terms: TermRegistry,
 }
 
 /// A stage built from a scenario's pipeline entry.
@@ -84,18 +88,44 @@ impl StageRegistry {
         self.insert(name, summary, build);
     }
 
-    /// As [`StageRegistry::register_checked`], with the refusal as text; write it
-    /// `field `x` = v ...` (as [`ParamError`] does) for the loader to find the field.
-    pub fn register<P, S>(
+    /// As [`StageRegistry::register_checked`], for parameters read with the registry
+    /// at hand: `read` parses them from the scenario (through a
+    /// `serde::de::DeserializeSeed` that carries what it needs of the registry, e.g.
+    /// [`StageRegistry::terms`]).
+    pub fn register_read<P, S, E>(
         &mut self,
         name: &str,
         summary: &'static str,
-        build: impl Fn(P) -> Result<S, String> + Send + Sync + 'static,
+        read: impl Fn(
+                &StageRegistry,
+                &mut dyn erased_serde::Deserializer,
+            ) -> Result<P, erased_serde::Error>
+            + Send
+            + Sync
+            + 'static,
+        build: impl Fn(P) -> Result<S, E> + Send + Sync + 'static,
     ) where
-        P: DeserializeOwned + Serialize + 'static,
+        P: Serialize + 'static,
         S: Stage + 'static,
+        E: std::error::Error,
     {
-        self.insert(name, summary, build);
+        self.insert_read(name, summary, read, build);
+    }
+
+    /// Registers pair term `T` as `name` (CamelCase, as a scenario writes it in
+    /// `Forces(terms: [...])`); it runs in Forces' fused neighbour loop after the
+    /// shipped terms of the list. See [`TermRegistry::register`].
+    pub fn register_term<T>(&mut self, name: &'static str, summary: &'static str)
+    where
+        T: Term + Send + Sync + 'static,
+        T::Params: Send + Sync + 'static,
+    {
+        self.terms.register::<T>(name, summary);
+    }
+
+    /// The pair terms registered by plugins.
+    pub fn terms(&self) -> &TermRegistry {
+        &self.terms
     }
 
     fn insert<P, S, E>(
@@ -108,8 +138,28 @@ impl StageRegistry {
         S: Stage + 'static,
         E: std::fmt::Display,
     {
-        let ctor: Constructor = Box::new(move |de| {
-            let params: P = erased_serde::deserialize(de)?;
+        self.insert_read(name, summary, |_, de| erased_serde::deserialize(de), build);
+    }
+
+    fn insert_read<P, S, E>(
+        &mut self,
+        name: &str,
+        summary: &'static str,
+        read: impl Fn(
+                &StageRegistry,
+                &mut dyn erased_serde::Deserializer,
+            ) -> Result<P, erased_serde::Error>
+            + Send
+            + Sync
+            + 'static,
+        build: impl Fn(P) -> Result<S, E> + Send + Sync + 'static,
+    ) where
+        P: Serialize + 'static,
+        S: Stage + 'static,
+        E: std::fmt::Display,
+    {
+        let ctor: Constructor = Box::new(move |registry, de| {
+            let params: P = read(registry, de)?;
             // As the loader reads them: a term list's `Name(field: value)` without the
             // newtype's inner parentheses.
             let resolved = ron_options()
@@ -144,7 +194,7 @@ impl StageRegistry {
         de: &mut dyn erased_serde::Deserializer,
     ) -> Option<Result<BuiltStage, erased_serde::Error>> {
         self.entries.get(name).map(|e| {
-            (e.build)(de).map(|(stage, resolved_params)| BuiltStage {
+            (e.build)(self, de).map(|(stage, resolved_params)| BuiltStage {
                 stage,
                 resolved_params,
             })
@@ -210,6 +260,28 @@ pub fn camel_case(name: &str) -> String {
             })
         })
         .collect()
+}
+
+/// Reads a bare identifier (a stage's name, a pair term's, a field's) as text; the
+/// `&str` says what is expected, for the message when something else is there.
+#[derive(Clone, Copy)]
+pub struct Identifier(pub &'static str);
+
+impl<'de> serde::de::DeserializeSeed<'de> for Identifier {
+    type Value = String;
+    fn deserialize<D: serde::Deserializer<'de>>(self, d: D) -> Result<String, D::Error> {
+        d.deserialize_identifier(self)
+    }
+}
+
+impl serde::de::Visitor<'_> for Identifier {
+    type Value = String;
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str(self.0)
+    }
+    fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<String, E> {
+        Ok(v.to_string())
+    }
 }
 
 /// RON options: `IMPLICIT_SOME` lets optional fields be written without `Some(..)`;

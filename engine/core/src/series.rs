@@ -52,15 +52,15 @@ impl SeriesWriter {
 
     /// [`SeriesWriter::open`] for a stage sampling every `interval` seconds, first
     /// refusing an interval that would give more than [`MAX_SAMPLES`] rows over the
-    /// run ([`check_samples`]). The error is the message for the stage's setup.
+    /// run ([`check_samples`]).
     pub fn open_sampled(
         sim: &Sim,
         path: &Path,
         columns: Vec<String>,
         interval: f64,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, OpenSampledError> {
         check_samples(sim.clock.end_time, interval, MAX_SAMPLES, "rows")?;
-        Self::open(sim, path, columns).map_err(|e| e.to_string())
+        Ok(Self::open(sim, path, columns)?)
     }
 
     /// Continues a file an earlier run wrote: keeps the header and the rows up to
@@ -150,15 +150,47 @@ impl SeriesWriter {
 /// kept in memory for the plots, so more would risk exhausting it.
 pub const MAX_SAMPLES: f64 = 5e6;
 
+/// A sampling interval that would give more samples than a run can keep.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("field `interval` = {interval} s gives {samples:.0} {what} over end_time = {end_time} s; accepted: at most {max:.0} (use a longer interval or a shorter run)")]
+pub struct TooManySamples {
+    /// [s]
+    pub interval: f64,
+    /// How many the interval would give.
+    pub samples: f64,
+    /// What is sampled ("rows", "frames").
+    pub what: &'static str,
+    /// [s]
+    pub end_time: f64,
+    pub max: f64,
+}
+
+/// Why [`SeriesWriter::open_sampled`] refused.
+#[derive(Debug, thiserror::Error)]
+pub enum OpenSampledError {
+    #[error(transparent)]
+    TooMany(#[from] TooManySamples),
+    #[error(transparent)]
+    Open(#[from] StepError),
+}
+
 /// Refuses, before the run, a sampling `interval` [s] that would give more than
 /// `max` samples over `end_time`; the message names the stage's `interval` field. An
 /// interval of 0 (every step) is not checked here.
-pub fn check_samples(end_time: f64, interval: f64, max: f64, what: &str) -> Result<(), String> {
+pub fn check_samples(
+    end_time: f64,
+    interval: f64,
+    max: f64,
+    what: &'static str,
+) -> Result<(), TooManySamples> {
     if interval > 0.0 && end_time / interval > max {
-        return Err(format!(
-            "field `interval` = {interval} s gives {:.0} {what} over end_time = {end_time} s; accepted: at most {max:.0} (use a longer interval or a shorter run)",
-            (end_time / interval).ceil()
-        ));
+        return Err(TooManySamples {
+            interval,
+            samples: (end_time / interval).ceil(),
+            what,
+            end_time,
+            max,
+        });
     }
     Ok(())
 }

@@ -581,9 +581,9 @@ fn checkpoint(
         e.bytes(&entry.stage.save_state(sim)?);
     }
     let bytes = sph_core::checkpoint::seal(e);
-    sph_core::checkpoint::write(&opts.out_dir, &bytes).map_err(|message| StepError::Output {
+    sph_core::checkpoint::write(&opts.out_dir, &bytes).map_err(|e| StepError::Output {
         path: "checkpoint".into(),
-        message,
+        message: e.to_string(),
     })
 }
 

@@ -27,10 +27,12 @@
 //!    unit and default; the run's `scenario.resolved.ron` records the values used.
 //!    (`every: N`, to run a stage every N steps, is handled by the runner for every
 //!    stage; do not declare it.)
-//! 2. **Validation.** The constructor passed to [`StageRegistry::register`] receives the
-//!    parsed parameters and returns the stage, or `Err(message)` for an out-of-range
-//!    value. Name the field and what is accepted: "field `interval` = -1 is out of
-//!    range; accepted: seconds >= 0". The loader adds the file, line and column.
+//! 2. **Validation.** The constructor passed to [`StageRegistry::register_checked`]
+//!    receives the parsed parameters and returns the stage, or a [`ParamError`] for an
+//!    out-of-range value, naming the field and what is accepted
+//!    (`ParamError::new("interval", -1, "seconds >= 0")`, shown as "field `interval` =
+//!    -1 is out of range; accepted: seconds >= 0"). The loader adds the file, line and
+//!    column.
 //! 3. **The stage.** Implement [`Stage`]:
 //!    - [`Stage::name`]: the registered snake_case name (used in spans, the profile
 //!      table and errors);
@@ -164,7 +166,7 @@ impl Stage for MaxSpeed {
         // It also refuses an interval giving an absurd number of rows.
         let out =
             SeriesWriter::open_sampled(sim, &sim.out_dir.join(CSV), columns, self.params.interval)
-                .map_err(|e| SetupError::new(NAME, e))?;
+                .map_err(|e| SetupError::new(NAME, e.to_string()))?;
         self.out = Some(out);
         Ok(())
     }

@@ -43,16 +43,13 @@ pub struct ArtificialPressure {
 impl Term for ArtificialPressure {
     const READS: Fields = Fields::of(&[Field::PRho2]);
     type Params = Params;
-    fn check(p: &Params) -> Result<(), String> {
+    fn check(p: &Params) -> Result<(), sph_core::ParamError> {
         check_non_negative(&[
             ("epsilon", p.epsilon),
             ("epsilon_positive", p.epsilon_positive),
         ])?;
         if !(1..=12).contains(&p.exponent) {
-            return Err(format!(
-                "field `exponent` = {} is out of range; accepted: 1 to 12",
-                p.exponent
-            ));
+            return Err(sph_core::ParamError::new("exponent", p.exponent, "1 to 12"));
         }
         Ok(())
     }

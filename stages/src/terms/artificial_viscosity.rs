@@ -8,6 +8,7 @@
 
 use super::{check_non_negative, Term};
 use serde::{Deserialize, Serialize};
+use sph_core::contract::Access;
 use sph_core::pair::{Field, Fields, Lane, Me, Pair, RateTerm, Rates};
 use sph_core::sim::Constants;
 
@@ -50,8 +51,15 @@ impl ArtificialViscosity {
 impl Term for ArtificialViscosity {
     const READS: Fields = Fields::of(&[Field::Vx, Field::Vy, Field::Rho, Field::Sound]);
     type Params = Params;
-    fn check(p: &Params) -> Result<(), String> {
+    fn check(p: &Params) -> Result<(), sph_core::ParamError> {
         check_non_negative(&[("alpha", p.alpha), ("beta", p.beta)])
+    }
+    /// Exposes (alpha, beta) to the rest of the engine (a study's metrics name them).
+    fn declare(p: &Params, access: Access) -> Access {
+        access.exposes(sph_core::vocab::ArtificialViscosity {
+            alpha: p.alpha,
+            beta: p.beta,
+        })
     }
     fn build(p: &Params, c: &Constants) -> Self {
         Self {

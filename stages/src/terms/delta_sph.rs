@@ -1,15 +1,17 @@
 //! The delta-SPH density diffusion of Antuono et al. (2010, 2012) (docs/physics.md,
 //! "Density diffusion"): Molteni & Colagrossi's flux less its first-order part,
 //!   psi_ij = 2 (rho_j - rho_i) x_ji / r_ij^2 - (<grad rho>_i + <grad rho>_j),
-//! with the renormalised gradients ([`crate::density_gradient`]), which `Forces`
-//! computes in a pass of its own before the pair sums when it has this term. The correction
+//! with the renormalised gradients ([`crate::density_gradient`]), computed in a pass of
+//! their own before the pair sums (the term's [`Term::PRE_PASS`]). The correction
 //! makes the term vanish on any linear density field (the hydrostatic one included),
 //! also where the kernel is cut off, so it is consistent at the free surface.
 
 use super::diffusion::{Params, Scale};
 use super::Term;
+use sph_core::contract::Access;
 use sph_core::pair::{Field, Fields, Lane, Me, Pair, RateTerm, Rates};
 use sph_core::sim::Constants;
+use sph_core::vocab::DensityGradients;
 
 /// `DeltaSph(delta: 0.1)`.
 #[derive(Clone, Copy, Debug, Default)]
@@ -21,13 +23,17 @@ impl Term for DeltaSph {
     const READS: Fields = Fields::of(&[Field::Rho, Field::PRho2, Field::GradRhoX, Field::GradRhoY]);
     const DIFFUSION: bool = true;
     type Params = Params;
-    fn check(p: &Params) -> Result<(), String> {
+    fn check(p: &Params) -> Result<(), sph_core::ParamError> {
         p.check()
     }
     fn build(p: &Params, c: &Constants) -> Self {
         Self {
             scale: Scale::new(p, c),
         }
+    }
+    const PRE_PASS: Option<super::PrePass> = Some(crate::density_gradient::compute);
+    fn declare(_: &Params, access: Access) -> Access {
+        access.writes::<DensityGradients>()
     }
 }
 

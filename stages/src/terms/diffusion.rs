@@ -28,13 +28,14 @@ impl Default for Params {
 impl Params {
     /// delta must be a finite number in [0, 1]: above 1 the term dominates the
     /// continuity equation and the time step would have to shrink with it.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), sph_core::ParamError> {
         if (0.0..=1.0).contains(&self.delta) {
             Ok(())
         } else {
-            Err(format!(
-                "field `delta` = {} is out of range; accepted: a number from 0 to 1 (0.1 is usual)",
-                self.delta
+            Err(sph_core::ParamError::new(
+                "delta",
+                self.delta,
+                "a number from 0 to 1 (0.1 is usual)",
             ))
         }
     }

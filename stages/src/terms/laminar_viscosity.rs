@@ -38,7 +38,7 @@ pub struct LaminarViscosity {
 impl Term for LaminarViscosity {
     const READS: Fields = Fields::of(&[Field::Vx, Field::Vy, Field::Rho]);
     type Params = Params;
-    fn check(p: &Params) -> Result<(), String> {
+    fn check(p: &Params) -> Result<(), sph_core::ParamError> {
         super::check_non_negative(&[("nu", p.nu)])
     }
     fn build(p: &Params, c: &Constants) -> Self {

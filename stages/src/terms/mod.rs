@@ -2,10 +2,12 @@
 //! `sph_core::pair` (so the scalar and the SIMD path are the same source).
 //!
 //! Terms of the equations of motion ([`RateTerm`]s) are named in a scenario's
-//! `Forces(terms: [...])` and run in one neighbour loop. A new one is a file here with
-//! its `Params` and a [`Term`] impl, and one line in the [`rate_terms!`] list below;
-//! the list fixes the order in which the terms of one pair are added, whatever the
-//! order the scenario names them in. The density filters ([`shepard`], [`mls`], [`free_surface_density`]) are
+//! `Forces(terms: [...])` and run in one neighbour loop. A shipped one is a file here
+//! with its `Params` and a [`Term`] impl, and one line in the [`rate_terms!`] list
+//! below; the list fixes the order in which the terms of one pair are added, whatever
+//! the order the scenario names them in. A plugin's term implements the same [`Term`]
+//! in its own crate and is registered with `StageRegistry::register_term`; it is
+//! added after the shipped ones, in list order (`plugins/cohesion`). The density filters ([`shepard`], [`mls`], [`free_surface_density`]) are
 //! pair terms of their own, with their own accumulators.
 
 pub mod artificial_pressure;
@@ -25,33 +27,13 @@ pub mod riemann_diffusion;
 pub mod riemann_pressure;
 pub mod shepard;
 
-use serde::de::DeserializeOwned;
-use serde::{Deserialize, Serialize};
-use sph_core::pair::{Fields, Lane, Me, Pair, RateTerm, Rates};
+use serde::de::{self, DeserializeSeed, EnumAccess, SeqAccess, VariantAccess, Visitor};
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
+use sph_core::contract::Access;
+use sph_core::pair::{Fields, Lane, Me, Pair, PluginTerm, RateTerm, Rates};
+use sph_core::registry::{Identifier, ParamError};
 use sph_core::sim::Constants;
-
-/// A rate term built from its scenario parameters.
-pub trait Term: RateTerm + Sized {
-    /// The fields of i and j the term reads (its `RateTerm::reads`), known before the
-    /// run's constants are, for the stage's declared contract.
-    const READS: Fields;
-    /// Whether the term is a density diffusion (it adds to the continuity equation, so
-    /// it needs `Continuity()` in the same list, and a list takes one at most).
-    const DIFFUSION: bool = false;
-    /// The parameters a scenario gives it, with documented defaults.
-    type Params: Clone + std::fmt::Debug + Default + Serialize + DeserializeOwned;
-    /// Refuses out-of-range parameters with a message naming the field and what is
-    /// accepted (run when the scenario is read, so the error has its position).
-    fn check(_p: &Self::Params) -> Result<(), String> {
-        Ok(())
-    }
-    /// The term for a run with constants `c`, from checked parameters.
-    fn build(p: &Self::Params, c: &Constants) -> Self;
-    /// For a viscous term: read the ghosts' no-slip velocities (`Field::ShearVx`,
-    /// `ShearVy`; the walls do not slip) instead of their `Vx`, `Vy`. Other terms
-    /// ignore it.
-    fn wall_shear(&mut self) {}
-}
+pub use sph_core::terms::{PrePass, Term, TermParams, TermRegistry};
 
 /// A viscous term's reads: `base`, and the ghosts' no-slip velocities when it reads
 /// them ([`Term::wall_shear`]).
@@ -63,15 +45,84 @@ pub(crate) fn with_wall_shear(base: Fields, shear: bool) -> Fields {
 }
 
 /// Checks that every `(field, value)` is a finite number >= 0.
-pub(crate) fn check_non_negative(fields: &[(&str, f64)]) -> Result<(), String> {
+pub(crate) fn check_non_negative(fields: &[(&'static str, f64)]) -> Result<(), ParamError> {
     for &(field, v) in fields {
         if !(v >= 0.0 && v.is_finite()) {
-            return Err(format!(
-                "field `{field}` = {v} is out of range; accepted: a finite number >= 0"
-            ));
+            return Err(ParamError::new(field, v, "a finite number >= 0"));
         }
     }
     Ok(())
+}
+
+/// A term list refused: the messages name the field `terms` (or, for a term's own
+/// parameter, the term and its field) and what is accepted.
+#[derive(Debug, thiserror::Error)]
+pub enum TermListError {
+    #[error("field `terms`: {0} is named twice; name each term once")]
+    Twice(&'static str),
+    #[error("term {term}: {error}")]
+    Param {
+        term: &'static str,
+        error: ParamError,
+    },
+    #[error("field `terms`: {} are all density diffusions; name one at most", .0.join(", "))]
+    Diffusions(Vec<&'static str>),
+    #[error("field `terms`: {0} adds to the continuity equation's d rho/dt; name Continuity() in the same list")]
+    NoContinuity(&'static str),
+}
+
+/// Reads one term of a list, `Name(field: value, ...)`: a shipped one, or one a plugin
+/// registered in `terms`.
+#[derive(Clone, Copy)]
+pub struct TermSeed<'a>(pub &'a TermRegistry);
+
+/// Reads a term list, `[Name(...), ...]` ([`TermSeed`] for each).
+#[derive(Clone, Copy)]
+pub struct TermListSeed<'a>(pub &'a TermRegistry);
+
+impl<'de> DeserializeSeed<'de> for TermListSeed<'_> {
+    type Value = Vec<TermSpec>;
+    fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<Vec<TermSpec>, D::Error> {
+        d.deserialize_seq(self)
+    }
+}
+
+impl<'de> Visitor<'de> for TermListSeed<'_> {
+    type Value = Vec<TermSpec>;
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("a list of pair terms, e.g. [PressureGradient(), Continuity()]")
+    }
+    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Vec<TermSpec>, A::Error> {
+        let mut list = Vec::new();
+        while let Some(t) = seq.next_element_seed(TermSeed(self.0))? {
+            list.push(t);
+        }
+        Ok(list)
+    }
+}
+
+/// Reads a registered term's parameters through the erased deserializer.
+struct PluginSeed<'a> {
+    terms: &'a TermRegistry,
+    name: &'a str,
+}
+
+impl<'de> DeserializeSeed<'de> for PluginSeed<'_> {
+    type Value = Box<dyn TermParams>;
+    fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<Self::Value, D::Error> {
+        let mut erased = <dyn erased_serde::Deserializer>::erase(d);
+        match self.terms.read(self.name, &mut erased) {
+            Some(read) => read.map_err(de::Error::custom),
+            None => Err(de::Error::custom(format!("unknown term `{}`", self.name))),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for TermSpec {
+    /// A shipped term (no plugin's).
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<TermSpec, D::Error> {
+        TermSeed(&TermRegistry::default()).deserialize(d)
+    }
 }
 
 /// Declares the rate terms a scenario can name: the [`TermSpec`] enum a term list is
@@ -79,16 +130,22 @@ pub(crate) fn check_non_negative(fields: &[(&str, f64)]) -> Result<(), String> {
 macro_rules! rate_terms {
     ($($module:ident :: $ty:ident),* $(,)?) => {
         /// A term as a scenario names it: `Name(field: value, ...)`.
-        #[derive(Clone, Debug, Serialize, Deserialize)]
+        #[derive(Clone, Debug)]
         pub enum TermSpec {
             $($ty(<$module::$ty as Term>::Params),)*
+            /// A term a plugin registered ([`TermRegistry`]).
+            Plugin(Box<dyn TermParams>),
         }
+
+        /// The shipped terms' names, in summing order.
+        pub const SHIPPED: &[&str] = &[$(stringify!($ty)),*];
 
         impl TermSpec {
             /// The name a scenario writes.
             pub fn name(&self) -> &'static str {
                 match self {
                     $(TermSpec::$ty(_) => stringify!($ty),)*
+                    TermSpec::Plugin(p) => p.name(),
                 }
             }
 
@@ -96,6 +153,90 @@ macro_rules! rate_terms {
             pub fn reads(&self) -> Fields {
                 match self {
                     $(TermSpec::$ty(_) => <$module::$ty as Term>::READS,)*
+                    TermSpec::Plugin(p) => p.reads(),
+                }
+            }
+
+            /// Whether the term is a density diffusion ([`Term::DIFFUSION`]).
+            pub fn is_diffusion(&self) -> bool {
+                match self {
+                    $(TermSpec::$ty(_) => <$module::$ty as Term>::DIFFUSION,)*
+                    TermSpec::Plugin(p) => p.diffusion(),
+                }
+            }
+
+            fn check(&self) -> Result<(), ParamError> {
+                match self {
+                    $(TermSpec::$ty(p) => $module::$ty::check(p),)*
+                    TermSpec::Plugin(p) => p.check(),
+                }
+            }
+
+            /// The pass the term needs before the loop ([`Term::PRE_PASS`]).
+            pub fn pre_pass(&self) -> Option<PrePass> {
+                match self {
+                    $(TermSpec::$ty(_) => <$module::$ty as Term>::PRE_PASS,)*
+                    TermSpec::Plugin(p) => p.pre_pass(),
+                }
+            }
+
+            /// `access` with what the term declares ([`Term::declare`]).
+            pub fn declare(&self, access: Access) -> Access {
+                match self {
+                    $(TermSpec::$ty(p) => $module::$ty::declare(p, access),)*
+                    TermSpec::Plugin(p) => p.declare(access),
+                }
+            }
+        }
+
+        impl Serialize for TermSpec {
+            /// As a scenario writes it (with the variant newtypes unwrapped).
+            fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+                let mut k = 0u32;
+                $(
+                    if let TermSpec::$ty(p) = self {
+                        return s.serialize_newtype_variant("TermSpec", k, stringify!($ty), p);
+                    }
+                    k += 1;
+                )*
+                match self {
+                    TermSpec::Plugin(p) => s.serialize_newtype_variant("TermSpec", k, p.name(), p),
+                    _ => unreachable!("every shipped term returned above"),
+                }
+            }
+        }
+
+        impl<'de> DeserializeSeed<'de> for TermSeed<'_> {
+            type Value = TermSpec;
+            fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<TermSpec, D::Error> {
+                d.deserialize_enum("TermSpec", SHIPPED, self)
+            }
+        }
+
+        impl<'de> Visitor<'de> for TermSeed<'_> {
+            type Value = TermSpec;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a pair term, e.g. PressureGradient()")
+            }
+            fn visit_enum<A: EnumAccess<'de>>(self, data: A) -> Result<TermSpec, A::Error> {
+                let (name, variant) = data.variant_seed(Identifier("a pair term's name"))?;
+                match name.as_str() {
+                    $(stringify!($ty) => variant.newtype_variant().map(TermSpec::$ty),)*
+                    _ if self.0.contains(&name) => variant
+                        .newtype_variant_seed(PluginSeed { terms: self.0, name: &name })
+                        .map(TermSpec::Plugin),
+                    _ => {
+                        let known: Vec<String> = SHIPPED
+                            .iter()
+                            .copied()
+                            .chain(self.0.list().map(|(n, _)| n))
+                            .map(|n| format!("`{n}`"))
+                            .collect();
+                        Err(de::Error::custom(format!(
+                            "unknown variant `{name}`, expected one of {}",
+                            known.join(", ")
+                        )))
+                    }
                 }
             }
         }
@@ -151,37 +292,27 @@ macro_rules! rate_terms {
 
         impl RateTerms {
             /// Checks a term list: each term at most once, its parameters in range.
-            pub fn check(specs: &[TermSpec]) -> Result<(), String> {
+            pub fn check(specs: &[TermSpec]) -> Result<(), TermListError> {
                 for (k, spec) in specs.iter().enumerate() {
                     if specs[..k].iter().any(|s| s.name() == spec.name()) {
-                        return Err(format!(
-                            "field `terms`: {} is named twice; name each term once",
-                            spec.name()
-                        ));
+                        return Err(TermListError::Twice(spec.name()));
                     }
-                    let checked = match spec {
-                        $(TermSpec::$ty(p) => $module::$ty::check(p),)*
-                    };
-                    checked.map_err(|e| format!("term {}: {e}", spec.name()))?;
+                    spec.check().map_err(|error| TermListError::Param {
+                        term: spec.name(),
+                        error,
+                    })?;
                 }
-                let diffusions: Vec<&str> = specs
+                let diffusions: Vec<&'static str> = specs
                     .iter()
-                    .filter(|s| match s {
-                        $(TermSpec::$ty(_) => <$module::$ty as Term>::DIFFUSION,)*
-                    })
+                    .filter(|s| s.is_diffusion())
                     .map(|s| s.name())
                     .collect();
                 if diffusions.len() > 1 {
-                    return Err(format!(
-                        "field `terms`: {} are all density diffusions; name one at most",
-                        diffusions.join(", ")
-                    ));
+                    return Err(TermListError::Diffusions(diffusions));
                 }
                 let continuity = specs.iter().any(|s| matches!(s, TermSpec::Continuity(_)));
-                if let (Some(d), false) = (diffusions.first(), continuity) {
-                    return Err(format!(
-                        "field `terms`: {d} adds to the continuity equation's d rho/dt; name Continuity() in the same list"
-                    ));
+                if let (Some(&d), false) = (diffusions.first(), continuity) {
+                    return Err(TermListError::NoContinuity(d));
                 }
                 Ok(())
             }
@@ -191,9 +322,9 @@ macro_rules! rate_terms {
                 0 $(| if self.$module.is_some() { 1 << TermBit::$ty as u16 } else { 0 })*
             }
 
-            /// The terms of a checked list for a run with constants `c`; with
+            /// The shipped terms of a checked list for a run with constants `c`; with
             /// `wall_shear` the viscous terms read the ghosts' no-slip velocities
-            /// ([`Term::wall_shear`]).
+            /// ([`Term::wall_shear`]). The plugins' terms are [`plugin_terms`].
             pub fn build(specs: &[TermSpec], c: &Constants, wall_shear: bool) -> Self {
                 let mut set = RateTerms::default();
                 for spec in specs {
@@ -205,6 +336,7 @@ macro_rules! rate_terms {
                             }
                             set.$module = Some(t);
                         })*
+                        TermSpec::Plugin(_) => {}
                     }
                 }
                 set
@@ -225,6 +357,18 @@ macro_rules! rate_terms {
             }
         }
     };
+}
+
+/// The plugins' terms of a checked list, in list order, for a run with constants `c`
+/// (`wall_shear` as for [`RateTerms::build`]); they are summed after the shipped ones.
+pub fn plugin_terms(specs: &[TermSpec], c: &Constants, wall_shear: bool) -> Vec<PluginTerm> {
+    specs
+        .iter()
+        .filter_map(|s| match s {
+            TermSpec::Plugin(p) => Some(p.build(c, wall_shear)),
+            _ => None,
+        })
+        .collect()
 }
 
 rate_terms! {

@@ -20,7 +20,7 @@ impl Term for MolteniColagrossi {
     const READS: Fields = Fields::of(&[Field::Rho, Field::PRho2]);
     const DIFFUSION: bool = true;
     type Params = Params;
-    fn check(p: &Params) -> Result<(), String> {
+    fn check(p: &Params) -> Result<(), sph_core::ParamError> {
         p.check()
     }
     fn build(p: &Params, c: &Constants) -> Self {

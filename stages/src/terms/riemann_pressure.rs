@@ -51,13 +51,14 @@ impl Term for RiemannPressure {
     const READS: Fields =
         Fields::of(&[Field::Vx, Field::Vy, Field::Rho, Field::PRho2, Field::Sound]);
     type Params = Params;
-    fn check(p: &Params) -> Result<(), String> {
+    fn check(p: &Params) -> Result<(), sph_core::ParamError> {
         if p.limiter >= 0.0 && p.limiter <= 100.0 {
             Ok(())
         } else {
-            Err(format!(
-                "field `limiter` = {} is out of range; accepted: a number from 0 to 100 (3 is the paper's)",
-                p.limiter
+            Err(sph_core::ParamError::new(
+                "limiter",
+                p.limiter,
+                "a number from 0 to 100 (3 is the paper's)",
             ))
         }
     }

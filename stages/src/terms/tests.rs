@@ -5,7 +5,7 @@ use super::delta_sph::DeltaSph;
 use super::diffusion::Params;
 use super::fourtakas::Fourtakas;
 use super::molteni_colagrossi::MolteniColagrossi;
-use super::{RateTerms, Term, TermSpec};
+use super::{RateTerms, Term, TermListError, TermSpec};
 use glam::DVec2;
 use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure, Velocity};
 use sph_core::kernel::{Kernel, KernelKind, Wendland};
@@ -274,11 +274,23 @@ fn term_lists_with_a_diffusion_are_checked() {
     };
     assert!(check("[Continuity(), Fourtakas()]").is_ok());
     let e = check("[Continuity(), Fourtakas(delta: -0.1)]").unwrap_err();
-    assert!(e.contains("delta") && e.contains("0 to 1"), "{e}");
+    assert!(
+        matches!(&e, TermListError::Param { term: "Fourtakas", error }
+            if error.field == "delta" && error.accepted.contains("0 to 1")),
+        "{e}"
+    );
     let e = check("[Continuity(), Fourtakas(), MolteniColagrossi()]").unwrap_err();
-    assert!(e.contains("one at most"), "{e}");
+    assert!(
+        matches!(&e, TermListError::Diffusions(d) if d == &["Fourtakas", "MolteniColagrossi"]),
+        "{e}"
+    );
+    assert!(e.to_string().contains("one at most"), "{e}");
     let e = check("[PressureGradient(), MolteniColagrossi()]").unwrap_err();
-    assert!(e.contains("Continuity()"), "{e}");
+    assert!(
+        matches!(e, TermListError::NoContinuity("MolteniColagrossi")),
+        "{e}"
+    );
+    assert!(e.to_string().contains("Continuity()"), "{e}");
 }
 
 /// The renormalised gradient is exact on a linear density field, inside the fluid and
@@ -669,7 +681,11 @@ fn term_parameters_out_of_range_are_refused() {
         ("[Continuity(), DeltaSph(delta: -0.1)]", "delta"),
     ] {
         let e = check(text).expect_err(text);
-        assert!(e.contains(&format!("`{field}`")), "{text}: {e}");
+        assert!(
+            matches!(&e, TermListError::Param { error, .. } if error.field == field),
+            "{text}: {e}"
+        );
+        assert!(e.to_string().contains(&format!("`{field}`")), "{text}: {e}");
     }
     for text in [
         "[ArtificialViscosity(alpha: 0.0, beta: 0.0)]",

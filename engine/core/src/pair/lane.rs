@@ -134,6 +134,15 @@ pub(crate) mod sealed {
     /// How a lane type reads a field of a group of particle records. Crate-private:
     /// terms see gathered values only through [`crate::pair::Pair::j`].
     pub trait Gather: Copy {
+        /// Adds plugin term `t`'s share of one pair group, through the function
+        /// compiled for this lane type ([`crate::pair::PluginTerm`]).
+        fn plugin_pair(
+            t: &crate::pair::PluginTerm,
+            me: &crate::pair::Me,
+            p: &crate::pair::Pair<Self>,
+            r: &mut crate::pair::Rates<Self>,
+        ) where
+            Self: super::Lane;
         /// Record offsets of a group of neighbours, with the lanes in use.
         type Index: Copy;
         /// The group `js` (1 to `WIDTH` joint indices) of a buffer of `len` records of
@@ -175,6 +184,15 @@ pub(crate) mod sealed {
     }
 
     impl Gather for f64 {
+        #[inline(always)]
+        fn plugin_pair(
+            t: &crate::pair::PluginTerm,
+            me: &crate::pair::Me,
+            p: &crate::pair::Pair<f64>,
+            r: &mut crate::pair::Rates<f64>,
+        ) {
+            (t.fns.scalar)(t.term(), me, p, r)
+        }
         type Index = usize;
         #[inline(always)]
         unsafe fn index(js: &[u32], stride: usize, len: usize) -> usize {

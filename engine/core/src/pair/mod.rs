@@ -33,12 +33,14 @@ macro_rules! each_field {
 }
 
 pub mod lane;
+mod plugin;
 pub mod rates;
 mod record;
 #[cfg(target_arch = "x86_64")]
 mod x86;
 
 pub use lane::{whole_pow, Lane};
+pub use plugin::{NoTerms, PluginTerm, WithPlugins};
 pub use rates::{EquationsOfMotion, RateSums, RateTerm, Rates};
 pub use record::{Field, Fields, Packed, Records};
 

@@ -7,7 +7,8 @@
 //! that is what makes their safe arithmetic sound.
 
 use super::lane::{sealed::Gather, Lane};
-use super::{Kernel, PairTerm, Pass};
+use super::{Kernel, Me, Pair, PairTerm, Pass, PluginTerm, RateTerm, Rates};
+use std::any::Any;
 use std::arch::x86_64::*;
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
@@ -23,6 +24,42 @@ pub(super) unsafe fn sum_avx512<T: PairTerm, K: Kernel, const FIELDS: u16>(
 ) -> T::Out {
     // SAFETY: the caller's contract.
     unsafe { pass.drive::<Avx512, FIELDS>(i, js) }
+}
+
+/// A plugin term's pair function for lane type `L` ([`PluginTerm`]).
+pub(super) type PluginFn<L> = unsafe fn(&dyn Any, &Me, &Pair<L>, &mut Rates<L>);
+
+/// Plugin term `T`'s share of one group in AVX-512 lanes, compiled with those
+/// instructions (so the term's lane arithmetic is inlined).
+///
+/// # Safety
+/// The processor has AVX-512F and AVX-512VL.
+#[target_feature(enable = "avx512f,avx512vl")]
+pub(super) unsafe fn plugin_avx512<T: RateTerm + 'static>(
+    t: &dyn Any,
+    me: &Me,
+    p: &Pair<Avx512>,
+    r: &mut Rates<Avx512>,
+) {
+    if let Some(t) = t.downcast_ref::<T>() {
+        t.pair(me, p, r)
+    }
+}
+
+/// The same in AVX2 lanes.
+///
+/// # Safety
+/// The processor has AVX2.
+#[target_feature(enable = "avx2")]
+pub(super) unsafe fn plugin_avx2<T: RateTerm + 'static>(
+    t: &dyn Any,
+    me: &Me,
+    p: &Pair<Avx2>,
+    r: &mut Rates<Avx2>,
+) {
+    if let Some(t) = t.downcast_ref::<T>() {
+        t.pair(me, p, r)
+    }
 }
 
 /// The pass's sum for particle `i` with AVX2 lanes (`FIELDS`: see `Pass::drive`).
@@ -141,6 +178,12 @@ fn reduce(a: [f64; 8]) -> f64 {
 }
 
 impl Gather for Avx512 {
+    #[inline(always)]
+    fn plugin_pair(t: &PluginTerm, me: &Me, p: &Pair<Self>, r: &mut Rates<Self>) {
+        // SAFETY: a value of this type (here `p`'s lanes) exists only on a processor
+        // with its instructions (module documentation).
+        unsafe { (t.fns.avx512)(t.term(), me, p, r) }
+    }
     type Index = (__m256i, __mmask8);
     #[inline(always)]
     unsafe fn index(js: &[u32], stride: usize, len: usize) -> Self::Index {
@@ -317,6 +360,12 @@ fn avx2_array(v: Avx2) -> [f64; 8] {
 }
 
 impl Gather for Avx2 {
+    #[inline(always)]
+    fn plugin_pair(t: &PluginTerm, me: &Me, p: &Pair<Self>, r: &mut Rates<Self>) {
+        // SAFETY: a value of this type (here `p`'s lanes) exists only on a processor
+        // with its instructions (module documentation).
+        unsafe { (t.fns.avx2)(t.term(), me, p, r) }
+    }
     /// Record offsets, and the lanes in use as a mask.
     type Index = ([__m128i; 2], [__m256d; 2]);
     #[inline(always)]

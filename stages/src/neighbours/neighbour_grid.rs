@@ -28,7 +28,7 @@ use sph_core::vocab::{
 use sph_core::world::{
     archetype, column, column_kinds, column_mut, count, ensure_component, ColumnKinds, Joined,
 };
-use sph_core::StageRegistry;
+use sph_core::{ParamError, StageRegistry};
 
 #[derive(Debug, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -62,15 +62,12 @@ impl Default for Params {
 }
 
 pub fn register(registry: &mut StageRegistry) {
-    registry.register(
+    registry.register_checked(
         "neighbour_grid",
         "cell-linked list; neighbour lists of the fluid particles",
         |p: Params| {
             if !(p.skin >= 0.0 && p.skin <= 10.0) {
-                return Err(format!(
-                    "field `skin` = {} is out of range; accepted: 0 to 10 particle spacings",
-                    p.skin
-                ));
+                return Err(ParamError::new("skin", p.skin, "0 to 10 particle spacings"));
             }
             Ok(NeighbourGrid {
                 count: p.count,

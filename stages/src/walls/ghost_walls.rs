@@ -72,7 +72,7 @@ impl Default for Params {
 }
 
 pub fn register(registry: &mut StageRegistry) {
-    registry.register(
+    registry.register_checked(
         "ghost_walls",
         "mirror fluid particles across the walls as ghost particles",
         |p: Params| {

@@ -73,7 +73,7 @@ pub struct Params {
 }
 
 pub fn register(registry: &mut StageRegistry) {
-    registry.register(
+    registry.register_checked(
         "wall_pressure",
         "extrapolate the fluid's pressure to the wall particles (Adami et al. 2012)",
         |p: Params| {

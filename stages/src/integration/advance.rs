@@ -34,7 +34,7 @@ impl Default for Params {
 }
 
 pub fn register(registry: &mut StageRegistry) {
-    registry.register(
+    registry.register_checked(
         "advance",
         "DFSPH: moves the particles by the solved velocities and advances the clock",
         |p: Params| {

@@ -8,7 +8,7 @@ use sph_core::contract::Access;
 use sph_core::sim::{Sim, Tait};
 use sph_core::stage::{Stage, StepError};
 use sph_core::world::{archetype, column, column_mut};
-use sph_core::StageRegistry;
+use sph_core::{ParamError, StageRegistry};
 
 /// rho_0, c_0 and gamma are the scenario's `fluid`.
 #[derive(Debug, Default, Serialize, Deserialize)]
@@ -20,14 +20,16 @@ pub struct Params {
 }
 
 pub fn register(registry: &mut StageRegistry) {
-    registry.register(
+    registry.register_checked(
         "eos",
         "Tait equation of state: pressure from density",
         |p: Params| {
             // A NaN floor would compare false with every pressure and leave it NaN.
             if let Some(f) = p.min_pressure.filter(|f| !f.is_finite()) {
-                return Err(format!(
-                    "field `min_pressure` = {f} is out of range; accepted: Some(<Pa>), a finite number (0 suppresses tension)"
+                return Err(ParamError::new(
+                    "min_pressure",
+                    f,
+                    "Some(<Pa>), a finite number (0 suppresses tension)",
                 ));
             }
             Ok(Eos {

@@ -82,7 +82,7 @@ impl Stage for VtkFrames {
             MAX_FRAMES,
             "frames",
         )
-        .map_err(|m| SetupError::new("vtk_frames", m))?;
+        .map_err(|e| SetupError::new("vtk_frames", e.to_string()))?;
         self.index = Some(PvdIndex::new(sim.out_dir.join("frames.pvd")));
         if sph_core::kinematics::moving(&sim.world) {
             self.walls = Some(PvdIndex::new(sim.out_dir.join("walls.pvd")));

@@ -31,7 +31,7 @@ use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{WallPose, Walls};
 use sph_core::walls::WallLine;
 use sph_core::world::{archetype, column_mut, count};
-use sph_core::StageRegistry;
+use sph_core::{ParamError, StageRegistry};
 
 #[derive(Debug, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -43,14 +43,16 @@ pub struct Params {
 }
 
 pub fn register(registry: &mut StageRegistry) {
-    registry.register(
+    registry.register_checked(
         "wall_particles",
         "fixed wall particles behind the walls, riding with them (Adami et al. 2012)",
         |p: Params| {
             if p.layers == Some(0) {
-                return Err(
-                    "field `layers` = 0 is out of range; accepted: a whole number of at least 1, or leave it out for one kernel support".to_string(),
-                );
+                return Err(ParamError::new(
+                    "layers",
+                    0,
+                    "a whole number of at least 1, or leave it out for one kernel support",
+                ));
             }
             Ok(WallParticles {
                 layers: p.layers,

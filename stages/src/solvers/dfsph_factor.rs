@@ -49,7 +49,7 @@ impl Default for Params {
 }
 
 pub fn register(registry: &mut StageRegistry) {
-    registry.register(
+    registry.register_checked(
         "dfsph_factor",
         "DFSPH: summation density and the solver factor alpha_i",
         |p: Params| {

@@ -42,7 +42,7 @@ pub struct Params {
 }
 
 pub fn register(registry: &mut StageRegistry) {
-    registry.register(
+    registry.register_checked(
         "reinitialise",
         "Shepard, MLS or free-surface summation density re-initialisation (use every: N)",
         |p: Params| {

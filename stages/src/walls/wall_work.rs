@@ -24,7 +24,9 @@
 use crate::terms::{continuity, RateTerms};
 use glam::DVec2;
 use sph_core::components::{Density, Mass, Velocity};
-use sph_core::pair::{with_records, EquationsOfMotion, Pass, RateSums, RateTerm};
+use sph_core::pair::{
+    with_records, EquationsOfMotion, Pass, PluginTerm, RateSums, RateTerm, WithPlugins,
+};
 use sph_core::sim::Sim;
 use sph_core::sim::Tait;
 use sph_core::stage::StepError;
@@ -35,11 +37,29 @@ use sph_core::world::sum_fixed;
 /// The walls' power on the fluid [W per metre of depth] from the state the forces just
 /// used; 0 without ghosts. Summed in fixed chunks in order ([`sum_fixed`]), so the
 /// same for any thread count.
-pub(crate) fn power(sim: &mut Sim, terms: &RateTerms) -> Result<f64, StepError> {
+pub(crate) fn power(
+    sim: &mut Sim,
+    terms: &RateTerms,
+    plugins: &[PluginTerm],
+) -> Result<f64, StepError> {
     let terms = RateTerms {
         continuity: Some(continuity::Continuity),
         ..*terms
     };
+    match plugins.is_empty() {
+        true => power_of(sim, terms),
+        false => power_of(
+            sim,
+            WithPlugins {
+                base: terms,
+                plugins,
+            },
+        ),
+    }
+}
+
+/// [`power`] for a term set holding continuity.
+fn power_of<R: RateTerm + Copy>(sim: &mut Sim, terms: R) -> Result<f64, StepError> {
     let eom = EquationsOfMotion(terms);
     let power = with_records(sim, terms.reads(), |sim, particles, records| {
         let Some(nb) = sim.resources.get::<Neighbours>() else {

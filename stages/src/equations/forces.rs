@@ -6,26 +6,32 @@
 //! same loop (one pass over the neighbours instead of two).
 
 use crate::rates::{self, Outputs};
-use crate::terms::{artificial_viscosity, pressure_gradient, RateTerms, TermSpec};
-use serde::{Deserialize, Serialize};
+use crate::terms::{
+    artificial_viscosity, plugin_terms, pressure_gradient, PrePass, RateTerms, TermListSeed,
+    TermRegistry, TermSpec,
+};
+use serde::de::{self, DeserializeSeed, MapAccess, Visitor};
+use serde::{Deserializer, Serialize};
 use sph_core::components::{Acceleration, DensityRate, Fluid, NeighbourCount};
 use sph_core::contract::Access;
+use sph_core::pair::{PluginTerm, WithPlugins};
+use sph_core::registry::Identifier;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{
-    require_neighbours, ArtificialViscosity, DensityGradients, DiffusionPower,
-    NeighbourCountsInPass, Neighbours, NoSlipVelocities, ViscousDissipation, WallPower,
+    require_neighbours, DiffusionPower, NeighbourCountsInPass, Neighbours, NoSlipVelocities,
+    ViscousDissipation, WallPower,
 };
 use sph_core::world::{archetype, ensure_component};
 use sph_core::StageRegistry;
 
-#[derive(Debug, Clone, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
+#[derive(Debug, Clone, Serialize)]
 pub struct Params {
     /// The pair terms, each at most once, e.g. `[PressureGradient(),
-    /// ArtificialViscosity(alpha: 0.03), ArtificialPressure(), Continuity()]`; they are
-    /// added in a fixed order whatever the order written. Default
-    /// `[PressureGradient(), ArtificialViscosity()]` (alpha 0.03, beta 0).
+    /// ArtificialViscosity(alpha: 0.03), ArtificialPressure(), Continuity()]`; the
+    /// shipped ones are added in a fixed order whatever the order written, then any a
+    /// plugin registered, in the order written. Default `[PressureGradient(),
+    /// ArtificialViscosity()]` (alpha 0.03, beta 0).
     pub terms: Vec<TermSpec>,
 }
 
@@ -40,15 +46,49 @@ impl Default for Params {
     }
 }
 
+/// Reads [`Params`] with the terms plugins registered: `(terms: [...])`, every field
+/// optional, none other accepted.
+struct ParamsSeed<'a>(&'a TermRegistry);
+
+const FIELDS: &[&str] = &["terms"];
+
+impl<'de> DeserializeSeed<'de> for ParamsSeed<'_> {
+    type Value = Params;
+    fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<Params, D::Error> {
+        d.deserialize_struct("Params", FIELDS, self)
+    }
+}
+
+impl<'de> Visitor<'de> for ParamsSeed<'_> {
+    type Value = Params;
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("Forces' parameters, (terms: [...])")
+    }
+    fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Params, A::Error> {
+        let mut terms = None;
+        while let Some(key) = map.next_key_seed(Identifier("a field name"))? {
+            match key.as_str() {
+                "terms" if terms.is_some() => return Err(de::Error::duplicate_field("terms")),
+                "terms" => terms = Some(map.next_value_seed(TermListSeed(self.0))?),
+                other => return Err(de::Error::unknown_field(other, FIELDS)),
+            }
+        }
+        Ok(terms.map_or_else(Params::default, |terms| Params { terms }))
+    }
+}
+
 pub fn register(registry: &mut StageRegistry) {
-    registry.register(
+    registry.register_read(
         "forces",
         "dv/dt (and d rho/dt) from the pair terms it names, plus gravity",
-        |p: Params| {
+        |registry, de| ParamsSeed(registry.terms()).deserialize(de),
+        |p: Params| -> Result<Forces, crate::terms::TermListError> {
             RateTerms::check(&p.terms)?;
             Ok(Forces {
                 params: p,
                 terms: RateTerms::default(),
+                plugins: Vec::new(),
+                pre_passes: Vec::new(),
                 chunk_power: Vec::new(),
                 wall_shear: false,
                 counts: false,
@@ -60,6 +100,11 @@ pub fn register(registry: &mut StageRegistry) {
 pub struct Forces {
     params: Params,
     terms: RateTerms,
+    /// The plugins' terms, summed after `terms` in the same loop.
+    plugins: Vec<PluginTerm>,
+    /// The passes the terms need before the loop ([`crate::terms::Term::PRE_PASS`]), in
+    /// list order.
+    pre_passes: Vec<PrePass>,
     /// The energy rates of each chunk of particles, kept between steps.
     chunk_power: Vec<rates::Power>,
     /// The viscous terms read the ghosts' no-slip velocities (`NoSlipVelocities`).
@@ -67,6 +112,27 @@ pub struct Forces {
     /// The fluid has a `NeighbourCount` column, which this pass fills in while the
     /// lists have a skin (`vocab::NeighbourCountsInPass`).
     counts: bool,
+}
+
+impl Forces {
+    /// The terms for the run, the viscous ones reading the ghosts' no-slip velocities
+    /// with `no_slip`.
+    fn build_terms(&mut self, sim: &Sim, no_slip: bool) {
+        self.terms = RateTerms::build(&self.params.terms, &sim.constants, no_slip);
+        self.plugins = plugin_terms(&self.params.terms, &sim.constants, no_slip);
+        self.wall_shear = no_slip;
+        self.pre_passes.clear();
+        for pass in self.params.terms.iter().filter_map(TermSpec::pre_pass) {
+            // Once each, however many terms need it.
+            if !self
+                .pre_passes
+                .iter()
+                .any(|&p| std::ptr::fn_addr_eq(p, pass))
+            {
+                self.pre_passes.push(pass);
+            }
+        }
+    }
 }
 
 impl Stage for Forces {
@@ -77,8 +143,7 @@ impl Stage for Forces {
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         require_neighbours(sim, "forces")?;
         let no_slip = sim.resources.contains::<NoSlipVelocities>();
-        self.terms = RateTerms::build(&self.params.terms, &sim.constants, no_slip);
-        self.wall_shear = no_slip;
+        self.build_terms(sim, no_slip);
         ensure_component::<Fluid, Acceleration>(sim);
         if self.terms.continuity.is_some() {
             ensure_component::<Fluid, DensityRate>(sim);
@@ -96,12 +161,11 @@ impl Stage for Forces {
         // known only now.
         let no_slip = sim.resources.contains::<NoSlipVelocities>();
         if no_slip != self.wall_shear {
-            self.terms = RateTerms::build(&self.params.terms, &sim.constants, no_slip);
-            self.wall_shear = no_slip;
+            self.build_terms(sim, no_slip);
         }
         // The walls' work on the fluid, for the energy budget: in the same pass when
         // the terms include continuity, else a pass over the ghost neighbours only
-        // (stages/src/wall_work.rs).
+        // (stages/src/walls/wall_work.rs).
         let wall = sim.resources.contains::<WallPower>();
         let fused = wall && self.terms.continuity.is_some();
         let out = Outputs {
@@ -117,10 +181,19 @@ impl Stage for Forces {
                     .get::<Neighbours>()
                     .is_some_and(|nb| nb.skin > 0.0),
         };
-        if self.terms.delta_sph.is_some() {
-            crate::density_gradient::compute(sim)?;
+        for pass in &self.pre_passes {
+            pass(sim)?;
         }
-        let power = rates::run(sim, &self.terms, out, &mut self.chunk_power)?;
+        let power = match self.plugins.is_empty() {
+            true => rates::run(sim, &self.terms, out, &mut self.chunk_power)?,
+            false => {
+                let terms = WithPlugins {
+                    base: self.terms,
+                    plugins: &self.plugins,
+                };
+                rates::run_set(sim, terms, out, &mut self.chunk_power)?
+            }
+        };
         if let Some(d) = sim.resources.get_mut::<ViscousDissipation>() {
             d.power = power.viscous;
         }
@@ -130,7 +203,7 @@ impl Stage for Forces {
         if wall {
             let power = match fused {
                 true => power.wall,
-                false => crate::wall_work::power(sim, &self.terms)?,
+                false => crate::wall_work::power(sim, &self.terms, &self.plugins)?,
             };
             if let Some(w) = sim.resources.get_mut::<WallPower>() {
                 w.power = power;
@@ -145,16 +218,7 @@ impl Stage for Forces {
             .iter()
             .fold(Default::default(), |f, t| t.reads().with(f));
         let continuity = terms.iter().any(|t| matches!(t, TermSpec::Continuity(_)));
-        let viscosity = terms.iter().find_map(|t| match t {
-            TermSpec::ArtificialViscosity(p) => Some(ArtificialViscosity {
-                alpha: p.alpha,
-                beta: p.beta,
-            }),
-            _ => None,
-        });
-        let gradient = terms.iter().any(|t| matches!(t, TermSpec::DeltaSph(_)));
         let access = rates::declare_reads(Access::new(), reads)
-            .writes_if::<DensityGradients>(gradient)
             .writes::<Acceleration>()
             .writes_if::<DensityRate>(continuity)
             .writes::<ViscousDissipation>()
@@ -162,9 +226,6 @@ impl Stage for Forces {
             .writes::<WallPower>()
             .uses::<NeighbourCount>()
             .uses::<NoSlipVelocities>();
-        match viscosity {
-            Some(v) => access.exposes(v),
-            None => access,
-        }
+        terms.iter().fold(access, |a, t| t.declare(a))
     }
 }

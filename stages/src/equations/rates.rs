@@ -127,7 +127,7 @@ pub(crate) fn run(
 }
 
 /// [`run`] for a term set `terms`.
-fn run_set<R: RateTerm + Copy>(
+pub(crate) fn run_set<R: RateTerm + Copy>(
     sim: &mut Sim,
     terms: R,
     out: Outputs,

@@ -182,7 +182,7 @@ impl Stage for Energy {
         let columns = columns().iter().map(|c| c.to_string()).collect();
         let path = sim.out_dir.join("energy.csv");
         let mut out = SeriesWriter::open_sampled(sim, &path, columns, self.params.interval)
-            .map_err(|m| SetupError::new("energy", m))?;
+            .map_err(|e| SetupError::new("energy", e.to_string()))?;
         // The initial state is the first row (t = 0, nothing dissipated yet); a resumed
         // run has it already.
         if sim.resources.get::<Resuming>().is_none() {

@@ -20,7 +20,7 @@ use sph_core::StageRegistry;
 pub struct Params {}
 
 pub fn register(registry: &mut StageRegistry) {
-    registry.register(
+    registry.register_checked(
         "continuity",
         "density rate from the continuity equation, in a pass of its own",
         |_: Params| {
