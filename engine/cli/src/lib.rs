@@ -340,7 +340,7 @@ fn report_waves(
     if !probes.exists() {
         return Ok(());
     }
-    let report = waves.measure(&probes)?;
+    let report = waves.measure(&probes).map_err(|e| e.to_string())?;
     let path = out_dir.join("waves.md");
     sph_core::atomic::write_atomic(&path, report.markdown().as_bytes())
         .map_err(|e| format!("{}: {e}", path.display()))?;
@@ -363,7 +363,8 @@ fn run_sweep(
     let responses =
         sph_study::sweep::run_sweep(path, overrides, registry, out_dir, workers, &|line| {
             println!("{line}")
-        })?;
+        })
+        .map_err(|e| e.to_string())?;
     println!(
         "sweep: {} cases in {:.1} s wall on {workers} workers; response.csv and response.png in {}",
         responses.len(),

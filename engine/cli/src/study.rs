@@ -94,7 +94,8 @@ pub fn main(args: &StudyArgs, registry: &StageRegistry) -> Result<(), String> {
         threads,
         report_only: args.report_only,
     };
-    let rows = run_study(&study, registry, &out, opts, &|line| println!("{line}"))?;
+    let rows = run_study(&study, registry, &out, opts, &|line| println!("{line}"))
+        .map_err(|e| e.to_string())?;
     let completed = |fallback: bool| {
         let of = rows.iter().filter(|r| r.case.fallback == fallback);
         (of.clone().filter(|r| r.completed()).count(), of.count())
@@ -127,7 +128,7 @@ fn one_case(
     threads: usize,
     registry: &StageRegistry,
 ) -> Result<(), String> {
-    let index = find_case(study, k)?;
+    let index = find_case(study, k).map_err(|e| e.to_string())?;
     let n = study.cases.len();
     let name = &study.cases[index].name;
     let dir = out.join(name);
@@ -137,7 +138,8 @@ fn one_case(
         index + 1,
         dir.display()
     );
-    for (ran, row) in run_one_case(study, index, out, threads, registry)? {
+    let rows = run_one_case(study, index, out, threads, registry).map_err(|e| e.to_string())?;
+    for (ran, row) in rows {
         let name = &row.case.name;
         if ran {
             println!(

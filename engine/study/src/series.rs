@@ -2,12 +2,13 @@
 //! data) for the studies, sweeps and wave analysis. The writer is
 //! `sph_core::series::SeriesWriter`.
 
+use crate::StudyError;
 use std::path::Path;
 
 /// A CSV file as (header, rows of numbers), skipping `#` comment lines (the reference
 /// data's source lines); a cell that is not a number reads NaN.
-pub fn read_table(path: &Path) -> Result<(Vec<String>, Vec<Vec<f64>>), String> {
-    let at = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
+pub fn read_table(path: &Path) -> Result<(Vec<String>, Vec<Vec<f64>>), StudyError> {
+    let at = |e: &dyn std::fmt::Display| StudyError::file(path, e);
     let mut reader = csv::ReaderBuilder::new()
         .comment(Some(b'#'))
         .flexible(true)
@@ -40,18 +41,15 @@ pub fn find_column(header: &[String], pattern: &str) -> Option<usize> {
 /// Column `expr` of a time-series CSV against its first column (time), rows with a
 /// non-finite value left out. `expr` is a column ([`find_column`]) or a sum of columns
 /// written `a+b` (e.g. `kinetic+potential` of energy.csv).
-pub fn read_series(path: &Path, expr: &str) -> Result<Vec<(f64, f64)>, String> {
+pub fn read_series(path: &Path, expr: &str) -> Result<Vec<(f64, f64)>, StudyError> {
     let (header, rows) = read_table(path)?;
     let columns = expr
         .split('+')
         .map(|name| {
-            find_column(&header, name.trim()).ok_or_else(|| {
-                format!(
-                    "{}: no column `{}` (columns: {})",
-                    path.display(),
-                    name.trim(),
-                    header.join(", ")
-                )
+            find_column(&header, name.trim()).ok_or_else(|| StudyError::NoColumn {
+                path: path.to_path_buf(),
+                column: name.trim().to_string(),
+                columns: header.clone(),
             })
         })
         .collect::<Result<Vec<_>, _>>()?;
@@ -87,9 +85,13 @@ mod tests {
             vec![(0.0, 1.0), (1.0, 4.0)]
         );
         assert_eq!(read_series(&path, "a + b").unwrap(), vec![(0.0, 5.0)]);
-        assert!(read_series(&path, "c")
-            .unwrap_err()
-            .contains("no column `c`"));
+        let e = read_series(&path, "c").unwrap_err();
+        assert!(
+            matches!(&e, StudyError::NoColumn { column, columns, .. }
+                if column == "c" && columns.len() == 4),
+            "{e}"
+        );
+        assert!(e.to_string().contains("no column `c`"), "{e}");
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -29,6 +29,7 @@ mod report;
 pub use report::*;
 
 use crate::series::read_series;
+use crate::StudyError;
 use glam::DVec2;
 use serde::Deserialize;
 use sph_core::StageRegistry;
@@ -151,5 +152,45 @@ mod tests {
         let e = super::cases(&spec("Grid", r#""1.3""#), "s.ron", &[]).unwrap_err();
         assert_eq!(e.field.as_deref(), Some("linked"));
         assert!(e.to_string().contains("has 1 values for 2"), "{e}");
+    }
+
+    /// `--case K` by number (1-based) or folder name; anything else is refused with
+    /// the study's name, its case count and, for a name, the names it has.
+    #[test]
+    fn find_case_takes_a_number_or_a_name() {
+        let s = spec("Grid", r#""1.3", "0.9""#);
+        let study = Study {
+            cases: cases(&s, "s.ron", &[]).unwrap(),
+            spec: s,
+            file: "s.ron".into(),
+            scenario: "x.ron".into(),
+            fallbacks: Vec::new(),
+        };
+        assert_eq!(find_case(&study, "1").unwrap(), 0);
+        assert_eq!(find_case(&study, " 6 ").unwrap(), 5);
+        assert_eq!(find_case(&study, "c0_50.0__k_gauss").unwrap(), 5);
+        let e = find_case(&study, "7").unwrap_err();
+        assert!(
+            matches!(
+                &e,
+                StudyError::NoCase {
+                    count: 6,
+                    names: None,
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        assert!(
+            e.to_string()
+                .starts_with("--case 7: study s has cases 1 to 6"),
+            "{e}"
+        );
+        let e = find_case(&study, "c0_99").unwrap_err();
+        assert!(
+            matches!(&e, StudyError::NoCase { names: Some(n), .. } if n.len() == 6),
+            "{e}"
+        );
+        assert!(e.to_string().contains("c0_12.0__k_cubic"), "{e}");
     }
 }

@@ -22,6 +22,7 @@
 //! omega.
 
 use crate::linear_sloshing::RectangularTank;
+use crate::StudyError;
 use sph_core::vocab::ArtificialViscosity;
 use sph_core::StageRegistry;
 use sph_output::plot::{plot_series, Series, Style};
@@ -66,17 +67,25 @@ pub struct Response {
 }
 
 /// The sweep's cases from a scenario that has `sweep: (...)`.
-pub fn cases(scenario: &Scenario) -> Result<Vec<Case>, String> {
+pub fn cases(scenario: &Scenario) -> Result<Vec<Case>, StudyError> {
     let spec = &scenario.spec;
-    let sweep = spec.sweep.as_ref().ok_or("the scenario has no `sweep`")?;
-    let tank = spec.tank.as_ref().ok_or("a sweep needs a `tank`")?;
+    let sweep = spec
+        .sweep
+        .as_ref()
+        .ok_or(StudyError::NotASweep("the scenario has no `sweep`"))?;
+    let tank = spec
+        .tank
+        .as_ref()
+        .ok_or(StudyError::NotASweep("a sweep needs a `tank`"))?;
     if tank.motion.as_ref().and_then(|m| m.roll.as_ref()).is_none() {
-        return Err("a sweep varies the roll frequency: give `tank.motion.roll`".into());
+        return Err(StudyError::NotASweep(
+            "a sweep varies the roll frequency: give `tank.motion.roll`",
+        ));
     }
     let block = spec
         .fluid_blocks
         .first()
-        .ok_or("a sweep needs a fluid block")?;
+        .ok_or(StudyError::NotASweep("a sweep needs a fluid block"))?;
     let own = block.size.1 .0 / tank.width.0;
     let fillings: Vec<f64> = if sweep.filling.is_empty() {
         vec![own]
@@ -88,7 +97,7 @@ pub fn cases(scenario: &Scenario) -> Result<Vec<Case>, String> {
         for omega in sweep.omega.iter().map(|w| w.0) {
             let period = 2.0 * PI / omega;
             let end = (sweep.settle_periods.0 + sweep.fit_periods.0) * period;
-            let set = |s: String| s.parse::<Override>().map_err(|e| e.to_string());
+            let set = |s: String| s.parse::<Override>();
             let mut overrides = vec![
                 set(format!("tank.motion.roll.period={period}"))?,
                 set(format!("end_time={end}"))?,
@@ -155,10 +164,10 @@ pub fn run_sweep(
     out_dir: &Path,
     workers: usize,
     report: &(dyn Fn(&str) + Sync),
-) -> Result<Vec<Response>, String> {
-    let base = Scenario::load(path, overrides, registry).map_err(|e| e.to_string())?;
+) -> Result<Vec<Response>, StudyError> {
+    let base = Scenario::load(path, overrides, registry)?;
     let cases = cases(&base)?;
-    std::fs::create_dir_all(out_dir).map_err(|e| format!("{}: {e}", out_dir.display()))?;
+    std::fs::create_dir_all(out_dir).map_err(|e| StudyError::file(out_dir, e))?;
     let results = crate::parallel::run_parallel(&cases, workers, |i, case| {
         let r = run_case(path, overrides, registry, out_dir, case);
         match &r {
@@ -189,12 +198,10 @@ pub fn run_sweep(
     if failures.is_empty() {
         Ok(responses)
     } else {
-        Err(format!(
-            "{} of {} cases failed (the others are in response.csv):\n{}",
-            failures.len(),
-            cases.len(),
-            failures.join("\n")
-        ))
+        Err(StudyError::CasesFailed {
+            total: cases.len(),
+            failures,
+        })
     }
 }
 
@@ -204,32 +211,38 @@ fn run_case(
     registry: &StageRegistry,
     out_dir: &Path,
     case: &Case,
-) -> Result<Response, String> {
+) -> Result<Response, StudyError> {
     let mut all = overrides.to_vec();
     all.extend(case.overrides.iter().cloned());
-    let scenario = Scenario::load(path, &all, registry).map_err(|e| e.to_string())?;
-    let tank = scenario.spec.tank.clone().ok_or("no tank")?;
+    let scenario = Scenario::load(path, &all, registry)?;
+    let tank =
+        (scenario.spec.tank.clone()).ok_or(StudyError::NotASweep("a sweep needs a `tank`"))?;
     let roll = tank
         .motion
         .as_ref()
         .and_then(|m| m.roll.clone())
-        .ok_or("no roll")?;
+        .ok_or(StudyError::NotASweep(
+            "a sweep varies the roll frequency: give `tank.motion.roll`",
+        ))?;
     let theta_a = roll.amplitude.to_radians();
     let linear = linear_tank(&scenario, case.filling);
-    let motion = scenario.motion.clone().ok_or("no motion")?;
+    let motion = (scenario.motion.clone()).ok_or(StudyError::NotASweep(
+        "a sweep varies the roll frequency: give `tank.motion.roll`",
+    ))?;
     let axis_height = tank.pivot().y;
     let dir = out_dir.join(&case.name);
     let opts = RunOptions::quiet(&dir, 1);
     let summary = match run(scenario, &opts) {
         Ok(s) => s,
-        Err(RunError::Step { error, .. }) => {
-            return Err(format!("{error} (outputs in {})", dir.display()))
-        }
-        Err(e) => return Err(e.to_string()),
+        Err(RunError::Step { error, .. }) => return Err(StudyError::Unstable { error, dir }),
+        Err(e) => return Err(e.into()),
     };
     let (t, m): (Vec<f64>, Vec<f64>) =
         crate::series::read_series(&dir.join("probes.csv"), "roll_moment")
-            .map_err(|e| format!("{e}; add Probe(roll_moment: true)"))?
+            .map_err(|e| StudyError::Missing {
+                error: Box::new(e),
+                hint: "add Probe(roll_moment: true)",
+            })?
             .into_iter()
             .unzip();
     let theory = linear.roll_moment_history(
@@ -242,8 +255,14 @@ fn run_case(
     );
     let window = t.partition_point(|&s| s < case.fit_from);
     let fit = |y: &[f64]| {
-        fit_harmonic(&t[window..], &y[window..], case.omega)
-            .ok_or_else(|| format!("too few samples to fit in {}", dir.display()))
+        fit_harmonic(&t[window..], &y[window..], case.omega).ok_or_else(|| {
+            StudyError::TooFewSamples {
+                path: dir.join("probes.csv"),
+                what: "roll_moment".into(),
+                from: case.fit_from,
+                to: t.last().copied().unwrap_or(f64::NAN),
+            }
+        })
     };
     let (amplitude, phase) = fit(&m)?;
     let (linear_amplitude, linear_phase) = fit(&theory)?;
@@ -263,7 +282,11 @@ fn run_case(
 
 /// response.csv (one row per case) and response.png (amplitude against omega, one
 /// colour per filling, with the linear-theory curves).
-fn write_response(out_dir: &Path, base: &Scenario, responses: &[Response]) -> Result<(), String> {
+fn write_response(
+    out_dir: &Path,
+    base: &Scenario,
+    responses: &[Response],
+) -> Result<(), StudyError> {
     let mut csv = String::from(
         "filling,omega,omega_over_omega1,amplitude,phase_deg,linear_amplitude,linear_phase_deg,amplitude_error,steady_amplitude,steady_phase_deg,wall_seconds,steps,particle_steps_per_second\n",
     );
@@ -288,7 +311,7 @@ fn write_response(out_dir: &Path, base: &Scenario, responses: &[Response]) -> Re
     }
     let csv_path = out_dir.join("response.csv");
     sph_core::atomic::write_atomic(&csv_path, csv.as_bytes())
-        .map_err(|e| format!("{}: {e}", csv_path.display()))?;
+        .map_err(|e| StudyError::file(&csv_path, e))?;
     if responses.is_empty() {
         return Ok(());
     }
@@ -330,7 +353,7 @@ fn write_response(out_dir: &Path, base: &Scenario, responses: &[Response]) -> Re
         "moment amplitude [N m / m]",
         &series,
     )
-    .map_err(|e| e.to_string())
+    .map_err(StudyError::from)
 }
 
 /// Linear-theory amplitude against omega for filling `f`, cut off above `cap` (it

@@ -273,20 +273,25 @@ impl WaveTheory {
     }
 
     /// Reads the gauges from `probes.csv` and fits them over the window.
-    pub fn measure(&self, probes: &Path) -> Result<WaveReport, String> {
+    pub fn measure(&self, probes: &Path) -> Result<WaveReport, crate::StudyError> {
         let (t0, t1) = self.window;
         let mut heights = Vec::new();
         let mut harmonics = Vec::new();
         for (name, x) in &self.gauges {
             let (t, eta): (Vec<f64>, Vec<f64>) = read_series(probes, name)
-                .map_err(|e| format!("{e}; wave gauges need `wave_gauges` and a Probe()"))?
+                .map_err(|e| crate::StudyError::Missing {
+                    error: Box::new(e),
+                    hint: "wave gauges need `wave_gauges` and a Probe()",
+                })?
                 .into_iter()
                 .unzip();
             let (amplitude, phase) = harmonic(&t, &eta, self.omega, t0, t1).ok_or_else(|| {
-                format!(
-                    "{}: too few samples of {name} in {t0}..{t1} s",
-                    probes.display()
-                )
+                crate::StudyError::TooFewSamples {
+                    path: probes.to_path_buf(),
+                    what: name.clone(),
+                    from: t0,
+                    to: t1,
+                }
             })?;
             heights.push((
                 name.clone(),

@@ -6,6 +6,7 @@
 use super::metrics::pareto_front;
 use super::{scales, Row, Study};
 use crate::series::read_series;
+use crate::StudyError;
 use sph_core::StageRegistry;
 use sph_output::plot::{draw_series_plot, plot_series, Frame, Series, Style};
 use sph_scenario::Scenario;
@@ -27,7 +28,7 @@ pub fn draw(
     out_dir: &Path,
     rows: &[Row],
     registry: &StageRegistry,
-) -> Result<Vec<(String, String)>, String> {
+) -> Result<Vec<(String, String)>, StudyError> {
     let mut out = Vec::new();
     let errors: Vec<String> = rows
         .first()
@@ -115,7 +116,7 @@ pub fn draw(
         };
         let title = format!("{}: {} per case", study.spec.name, o.column);
         plot_series(&out_dir.join(&file), &title, x_label, &y_label, &series)
-            .map_err(|e| e.to_string())?;
+            .map_err(StudyError::from)?;
         out.push((title, file));
     }
     Ok(out)
@@ -131,7 +132,7 @@ fn impacts_against_band(
     rows: &[Row],
     b: &str,
     reference: &Path,
-) -> Result<Frame, String> {
+) -> Result<Frame, StudyError> {
     let table = crate::series::read_table(reference)
         .map(|(_, rows)| rows)
         .unwrap_or_default();
@@ -177,12 +178,12 @@ fn impacts_against_band(
         });
     }
     draw_series_plot(path, title, "impact", &format!("{b} peak [kPa]"), &series)
-        .map_err(|e| e.to_string())
+        .map_err(StudyError::from)
 }
 
 /// Wall seconds against |metric|: one point series per case (its name in the legend),
 /// stopped cases marked, and the Pareto front of the completed cases as a line.
-fn speed_vs_error(path: &Path, title: &str, rows: &[Row], metric: &str) -> Result<(), String> {
+fn speed_vs_error(path: &Path, title: &str, rows: &[Row], metric: &str) -> Result<(), StudyError> {
     let point = |r: &Row| (r.wall_seconds, r.metric(metric).map_or(f64::NAN, f64::abs));
     let mut series: Vec<Series> = rows
         .iter()
@@ -217,13 +218,16 @@ fn speed_vs_error(path: &Path, title: &str, rows: &[Row], metric: &str) -> Resul
         &format!("|{metric}|"),
         &series,
     )
-    .map_err(|e| e.to_string())
+    .map_err(StudyError::from)
 }
 
 /// The cases' snapshot pictures at one time in one PNG, two per row, each under its
 /// case name (free surfaces side by side, e.g. per kernel). Cases without the picture
 /// (stopped before that time) are left out; returns false if none had it.
-pub fn snapshot_grid(path: &Path, panels: &[(String, std::path::PathBuf)]) -> Result<bool, String> {
+pub fn snapshot_grid(
+    path: &Path,
+    panels: &[(String, std::path::PathBuf)],
+) -> Result<bool, StudyError> {
     use plotters::prelude::*;
     let images: Vec<(&String, image::RgbImage)> = panels
         .iter()
@@ -250,7 +254,7 @@ pub fn snapshot_grid(path: &Path, panels: &[(String, std::path::PathBuf)]) -> Re
         }
         Ok(())
     })
-    .map_err(|e| e.to_string())?;
+    .map_err(StudyError::from)?;
     Ok(true)
 }
 

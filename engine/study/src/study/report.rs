@@ -26,18 +26,16 @@ pub fn header(study: &Study, rows: &[Row]) -> Vec<String> {
     h
 }
 
-pub(crate) fn write_csv(path: &Path, study: &Study, rows: &[Row]) -> Result<(), String> {
+pub(crate) fn write_csv(path: &Path, study: &Study, rows: &[Row]) -> Result<(), StudyError> {
     let mut w = csv::Writer::from_writer(Vec::new());
-    let err = |e: csv::Error| format!("{}: {e}", path.display());
+    let err = |e: csv::Error| StudyError::file(path, e);
     w.write_record(header(study, rows)).map_err(err)?;
     for r in rows {
         let rec = r.cells(|v| v.to_string());
         w.write_record(rec).map_err(err)?;
     }
-    let bytes = w
-        .into_inner()
-        .map_err(|e| format!("{}: {e}", path.display()))?;
-    sph_core::atomic::write_atomic(path, &bytes).map_err(|e| format!("{}: {e}", path.display()))
+    let bytes = w.into_inner().map_err(|e| StudyError::file(path, e))?;
+    sph_core::atomic::write_atomic(path, &bytes).map_err(|e| StudyError::file(path, e))
 }
 
 /// A number with four significant digits, or `-` when not finite.
@@ -60,7 +58,7 @@ pub(crate) fn write_report(
     rows: &[Row],
     figures: &[(String, String)],
     opts: StudyOptions,
-) -> Result<(), String> {
+) -> Result<(), StudyError> {
     let s = &study.spec;
     let StudyOptions {
         workers, threads, ..
@@ -171,6 +169,5 @@ pub(crate) fn write_report(
         }
     }
     let path = out_dir.join("report.md");
-    sph_core::atomic::write_atomic(&path, md.as_bytes())
-        .map_err(|e| format!("{}: {e}", path.display()))
+    sph_core::atomic::write_atomic(&path, md.as_bytes()).map_err(|e| StudyError::file(&path, e))
 }

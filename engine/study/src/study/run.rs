@@ -17,17 +17,17 @@ pub(crate) fn run_case(
     dir: &Path,
     threads: usize,
     registry: &StageRegistry,
-) -> Result<(), String> {
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+) -> Result<(), StudyError> {
+    std::fs::create_dir_all(dir).map_err(|e| StudyError::file(dir, e))?;
     for stale in ["summary.json", "final_particles.csv"] {
         let _ = std::fs::remove_file(dir.join(stale));
     }
     sph_core::atomic::write_atomic(&dir.join("case.txt"), case_text(case).as_bytes())
-        .map_err(|e| format!("{}: {e}", dir.display()))?;
+        .map_err(|e| StudyError::file(dir, e))?;
     // Who runs the case, for `--status`; removed when the run ends however it ends.
     let marker = dir.join(status::RUNNING);
     sph_core::atomic::write_atomic(&marker, status::marker_text().as_bytes())
-        .map_err(|e| format!("{}: {e}", marker.display()))?;
+        .map_err(|e| StudyError::file(&marker, e))?;
     let result = run_case_marked(study, case, dir, threads, registry);
     let _ = std::fs::remove_file(&marker);
     result
@@ -39,9 +39,8 @@ pub(crate) fn run_case_marked(
     dir: &Path,
     threads: usize,
     registry: &StageRegistry,
-) -> Result<(), String> {
-    let scenario =
-        Scenario::load(&study.scenario, &case.overrides, registry).map_err(|e| e.to_string())?;
+) -> Result<(), StudyError> {
+    let scenario = Scenario::load(&study.scenario, &case.overrides, registry)?;
     let opts = RunOptions::quiet(dir, threads);
     match run_keeping_state(scenario, &opts) {
         Ok((_, sim)) => {
@@ -58,35 +57,35 @@ pub(crate) fn run_case_marked(
             }
             let path = dir.join("final_particles.csv");
             sph_core::atomic::write_atomic(&path, csv.as_bytes())
-                .map_err(|e| format!("{}: {e}", path.display()))
+                .map_err(|e| StudyError::file(&path, e))
         }
         Err(RunError::Step { .. }) => Ok(()),
-        Err(e) => Err(e.to_string()),
+        Err(e) => Err(e.into()),
     }
 }
 
 /// The case a `--case K` argument names: its number in the study (1 to the number
 /// of cases, as `engine study` and `--status` count them) or its folder name.
-pub fn find_case(study: &Study, k: &str) -> Result<usize, String> {
+pub fn find_case(study: &Study, k: &str) -> Result<usize, StudyError> {
     let n = study.cases.len();
+    let refused = |names: Option<Vec<String>>| StudyError::NoCase {
+        given: k.to_string(),
+        study: study.spec.name.clone(),
+        count: n,
+        names,
+    };
     if let Ok(number) = k.trim().parse::<usize>() {
         return if (1..=n).contains(&number) {
             Ok(number - 1)
         } else {
-            Err(format!(
-                "--case {k}: study {} has cases 1 to {n}",
-                study.spec.name
-            ))
+            Err(refused(None))
         };
     }
-    study.cases.iter().position(|c| c.name == k).ok_or_else(|| {
-        let names: Vec<&str> = study.cases.iter().map(|c| c.name.as_str()).collect();
-        format!(
-            "--case {k}: no case of study {} has that number or name; its cases are 1 to {n}: {}",
-            study.spec.name,
-            names.join(", ")
-        )
-    })
+    study
+        .cases
+        .iter()
+        .position(|c| c.name == k)
+        .ok_or_else(|| refused(Some(study.cases.iter().map(|c| c.name.clone()).collect())))
 }
 
 /// Whether `dir` holds a run of `case` that stopped early (its summary's status is
@@ -99,7 +98,7 @@ pub fn stopped_early(dir: &Path, case: &Case) -> bool {
 }
 
 /// Whether a case ran now, and why it could not run if it could not.
-pub(crate) type Outcome = (bool, Result<(), String>);
+pub(crate) type Outcome = (bool, Result<(), StudyError>);
 
 /// Runs `case` into `<out_dir>/<case>/` unless that folder holds its finished run
 /// (or, with `report_only`, at all: then the row is `not run`).
@@ -117,7 +116,7 @@ pub(crate) fn run_or_skip(
         return (false, Ok(()));
     }
     if report_only {
-        return (false, Err("not run".to_string()));
+        return (false, Err(StudyError::NotRun));
     }
     (true, run_case(study, case, &dir, threads, registry))
 }
@@ -162,13 +161,14 @@ pub fn run_one_case(
     out_dir: &Path,
     threads: usize,
     registry: &StageRegistry,
-) -> Result<Vec<(bool, Row)>, String> {
+) -> Result<Vec<(bool, Row)>, StudyError> {
     if index >= study.cases.len() {
-        return Err(format!(
-            "study {} has no case {}",
-            study.spec.name,
-            index + 1
-        ));
+        return Err(StudyError::NoCase {
+            given: (index + 1).to_string(),
+            study: study.spec.name.clone(),
+            count: study.cases.len(),
+            names: None,
+        });
     }
     let (first, fallback) =
         run_with_fallback(study, index, out_dir, (threads, false), registry, &|_| ());
@@ -204,13 +204,13 @@ pub fn run_study(
     out_dir: &Path,
     opts: StudyOptions,
     report: &(dyn Fn(&str) + Sync),
-) -> Result<Vec<Row>, String> {
+) -> Result<Vec<Row>, StudyError> {
     let StudyOptions {
         workers,
         threads,
         report_only,
     } = opts;
-    std::fs::create_dir_all(out_dir).map_err(|e| format!("{}: {e}", out_dir.display()))?;
+    std::fs::create_dir_all(out_dir).map_err(|e| StudyError::file(out_dir, e))?;
     let n = study.cases.len();
     let outcomes = crate::parallel::run_parallel(&study.cases, workers, |i, _| {
         let numbered = |line: &str| report(&format!("case {}/{n} {line}", i + 1));
@@ -233,7 +233,7 @@ pub fn run_study(
                 case,
                 &out_dir.join(&case.name),
                 ran,
-                outcome.err(),
+                outcome.err().map(|e| e.to_string()),
                 registry,
             );
             if ran {
