@@ -50,6 +50,7 @@ fn surge_front_follows_martin_and_moyce() {
             100.0 * err
         );
     }
+    let _ = std::fs::remove_dir_all(&out);
 }
 
 /// The 5,000-particle dam break is chaotic after the impact: time steps that differ by

@@ -145,6 +145,7 @@ fn dfsph_still_water_holds_hydrostatic_pressure_at_rest_density() {
     let bound = 0.001 * (g * h).sqrt();
     let later = peak(0.15, 10.0);
     assert!(later < bound, "max speed {later} m/s exceeds {bound} m/s");
+    let _ = std::fs::remove_dir_all(&out);
 }
 
 /// At h/ds = 2.0 the Wendland kernel reaches 44 neighbours, and the relaxed Jacobi
@@ -192,6 +193,7 @@ fn dfsph_still_water_runs_at_h_over_ds_2_with_the_relaxation_capped() {
             100.0 * err
         );
     }
+    let _ = std::fs::remove_dir_all(&out);
 }
 
 /// The DFSPH solves carry each ghost's pressure and velocity from its mirrored source

@@ -137,6 +137,7 @@ fn hydrostatic_tank_holds_its_pressure_and_its_particles() {
         fastest < bound,
         "max speed {fastest} m/s exceeds {bound} m/s"
     );
+    let _ = std::fs::remove_dir_all(&out);
 }
 
 /// The still tank with `walls` in place of `GhostWalls(...)` and `before_eos`,

@@ -52,4 +52,5 @@ fn dam_break_stays_within_its_memory_budget() {
         per_particle > 150.0 && per_particle <= 365.0,
         "{per_particle:.0} heap bytes per particle while stepping (budget 365)"
     );
+    let _ = std::fs::remove_dir_all(&out);
 }

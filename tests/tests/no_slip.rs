@@ -41,7 +41,8 @@ fn ghosts_mirror_the_normal_velocity_and_reverse_all_of_it_for_the_viscous_terms
     let overrides: Vec<&str> = overrides.iter().map(String::as_str).collect();
     let scenario = load(DAM_BREAK_DFSPH, "scenarios/dam_break_dfsph.ron", &overrides);
     let width = scenario.spec.tank.as_ref().expect("tank").width.0;
-    let (_, sim, _) = run_completed(scenario, "no-slip-mirrors", 2);
+    let (_, sim, out) = run_completed(scenario, "no-slip-mirrors", 2);
+    let _ = std::fs::remove_dir_all(&out);
     let fluid = archetype::<Fluid>(&sim.world).expect("fluid");
     let ghost = archetype::<Ghost>(&sim.world).expect("ghosts");
     let fv = column::<Velocity>(fluid).unwrap();
@@ -105,7 +106,8 @@ fn kept_ghosts_pair_their_velocities_after_a_particle_sort() {
     let overrides: Vec<&str> = overrides.iter().map(String::as_str).collect();
     let scenario = load(DAM_BREAK, "scenarios/dam_break.ron", &overrides);
     let width = scenario.spec.tank.as_ref().expect("tank").width.0;
-    let (_, sim, _) = run_completed(scenario, "no-slip-kept-ghosts", 2);
+    let (_, sim, out) = run_completed(scenario, "no-slip-kept-ghosts", 2);
+    let _ = std::fs::remove_dir_all(&out);
     let skin = sim
         .resources
         .get::<sph_core::vocab::Neighbours>()
@@ -156,6 +158,7 @@ fn dfsph_surge_with_no_slip_walls_follows_martin_and_moyce() {
     let scenario = load(DAM_BREAK_DFSPH, "scenarios/dam_break_dfsph.ron", &overrides);
     let (_, _, out) = run_completed(scenario, "no-slip-dfsph-surge", 2);
     let front = surge_front(&out, 0.3);
+    let _ = std::fs::remove_dir_all(&out);
     let t_end = front.last().expect("front samples").0;
     let errors: Vec<f64> = reference("martin_moyce_1952_surge_n2-2_a2.25in_pysph.csv")
         .iter()

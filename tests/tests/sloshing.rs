@@ -92,6 +92,7 @@ fn tilted_tank_at_rest_has_a_level_surface_hydrostatic_sensors_and_the_static_mo
         "roll moment {moment:.3} N m against the static {exact:.3} N m"
     );
     assert!((avg("roll_angle") - 6.0).abs() < 1e-9);
+    let _ = std::fs::remove_dir_all(&out);
 }
 
 #[test]
@@ -211,6 +212,7 @@ fn small_roll_response(
     .unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(responses.len(), ratios.len());
     assert!(out.join("response.csv").exists() && out.join("response.png").exists());
+    let _ = std::fs::remove_dir_all(&out);
     let omega1 = responses[0].omega1;
     assert!((omega1 / sigma1 - 1.0).abs() < 1e-5);
 
@@ -306,10 +308,12 @@ fn a_roll_series_from_csv_drives_the_tank_like_the_harmonic_it_samples() {
         o.push(motion);
         let s = load(TANK, scenario_file.to_str().unwrap(), &o);
         let (_, _, out) = run_completed(s, tag, 1);
-        (
+        let read = (
             series(&out.join("probes.csv"), "roll_angle"),
             series(&out.join("probes.csv"), "roll_moment"),
-        )
+        );
+        let _ = std::fs::remove_dir_all(&out);
+        read
     };
     let (angle, moment) = run("tank.motion=(series: \"roll.csv\")", "series_run");
     let (_, harmonic) = run(
@@ -326,6 +330,7 @@ fn a_roll_series_from_csv_drives_the_tank_like_the_harmonic_it_samples() {
     for ((t, a), (_, b)) in moment.iter().zip(&harmonic) {
         assert!((a - b).abs() < 0.02 * range, "t = {t}: {a} vs {b}");
     }
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// The long run at resonance: `cargo test --release -p sph-tests --test sloshing -- --ignored --nocapture`.

@@ -81,6 +81,9 @@ fn missing() -> Option<String> {
 struct Cluster {
     dir: PathBuf,
     conf: PathBuf,
+    /// The test's output folders ([`Cluster::temp`]), removed with the cluster's own
+    /// when the test passes (kept to look at when it fails).
+    scratch: std::cell::RefCell<Vec<PathBuf>>,
 }
 
 impl Cluster {
@@ -106,6 +109,7 @@ impl Cluster {
         let cluster = Self {
             conf: dir.join("slurm.conf"),
             dir,
+            scratch: Default::default(),
         };
         assert!(
             o.status.success(),
@@ -113,6 +117,13 @@ impl Cluster {
             text(&o)
         );
         Some(cluster)
+    }
+
+    /// A fresh output folder for the test, removed when the cluster is.
+    fn temp(&self, tag: &str) -> PathBuf {
+        let dir = temp(tag);
+        self.scratch.borrow_mut().push(dir.clone());
+        dir
     }
 
     fn cmd(&self, exe: &str) -> Command {
@@ -199,6 +210,11 @@ impl Drop for Cluster {
         if let Ok(o) = o {
             eprint!("{}", text(&o));
         }
+        if !std::thread::panicking() {
+            for dir in self.scratch.borrow().iter().chain([&self.dir]) {
+                let _ = std::fs::remove_dir_all(dir);
+            }
+        }
     }
 }
 
@@ -227,7 +243,7 @@ fn a_study_submitted_to_slurm_reports_what_it_reports_here() {
     };
     let clock = Instant::now();
     let file = repo().join("tests/scenarios/study_three.ron");
-    let (here, there) = (temp("study-here"), temp("study-slurm"));
+    let (here, there) = (cluster.temp("study-here"), cluster.temp("study-slurm"));
     let o = Command::new(ENGINE)
         .args([
             "study",
@@ -386,7 +402,7 @@ fn a_run_preempted_by_sigterm_is_requeued_and_ends_as_an_uninterrupted_run() {
         return;
     };
     let scenario = repo().join("scenarios/wave_maker.ron");
-    let (reference, out) = (temp("run-reference"), temp("run-slurm"));
+    let (reference, out) = (cluster.temp("run-reference"), cluster.temp("run-slurm"));
     let sets: Vec<String> = RUN_SETS
         .iter()
         .flat_map(|s| ["--set".to_string(), s.to_string()])
@@ -512,7 +528,7 @@ fn a_run_preempted_by_sigterm_is_requeued_and_ends_as_an_uninterrupted_run() {
     let summary = std::fs::read_to_string(out.join("summary.json")).unwrap();
     assert!(summary.contains("\"status\": \"completed\""), "{summary}");
     // Cancelled (plain scancel: SIGTERM, then the job ends): checkpointed, not requeued.
-    let cancelled = temp("run-cancelled");
+    let cancelled = cluster.temp("run-cancelled");
     let o = cluster
         .cmd(ENGINE)
         .arg(&scenario)

@@ -16,6 +16,19 @@ fn temp(tag: &str) -> PathBuf {
     dir
 }
 
+/// Removes a test's folders when it passes (kept to look at when it fails).
+struct Cleanup(Vec<PathBuf>);
+
+impl Drop for Cleanup {
+    fn drop(&mut self) {
+        if !std::thread::panicking() {
+            for dir in &self.0 {
+                let _ = std::fs::remove_dir_all(dir);
+            }
+        }
+    }
+}
+
 fn engine(args: &[&str]) -> Output {
     Command::new(ENGINE).args(args).output().unwrap()
 }
@@ -85,6 +98,7 @@ fn state_of(table: &str, name: &str) -> String {
 fn one_case_runs_as_the_study_runs_it_and_status_reads_the_folders() {
     let out = temp("case");
     let local = temp("case-local");
+    let _cleanup = Cleanup(vec![out.clone(), local.clone()]);
     let (c1, c2, c3) = ("c0_20.0", "c0_30.0", "c0_40.0");
 
     let status = study_ok(&out, &["--status"]);
@@ -202,6 +216,7 @@ fn dead_pid() -> u32 {
 #[test]
 fn submit_dry_run_writes_an_array_of_the_unfinished_cases_and_a_report_job() {
     let out = temp("dry");
+    let _cleanup = Cleanup(vec![out.clone()]);
     // Case 2 finished earlier: the array holds 1 and 3 only.
     study_ok(&out, &["--case", "2", "--set", "end_time=0.2"]);
     let said = study_ok(
@@ -263,6 +278,7 @@ fn submit_dry_run_writes_an_array_of_the_unfinished_cases_and_a_report_job() {
 
     // Without sbatch on PATH, submitting says so.
     let empty = temp("nopath");
+    let _empty = Cleanup(vec![empty.clone()]);
     std::fs::create_dir_all(&empty).unwrap();
     let o = Command::new(ENGINE)
         .args(["study", study_file().to_str().unwrap(), "--out"])
@@ -286,6 +302,7 @@ fn submit_dry_run_writes_an_array_of_the_unfinished_cases_and_a_report_job() {
 #[test]
 fn run_submit_dry_run_writes_a_requeueing_script() {
     let out = temp("run-dry");
+    let _cleanup = Cleanup(vec![out.clone()]);
     let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/wave_maker.ron");
     let o = engine(&[
         scenario.to_str().unwrap(),

@@ -395,6 +395,7 @@ mod tests {
         assert!(text.contains("0 0 0 2 0.5 0"));
         assert!(text.contains("2 4 \n"));
         assert!(write_segments_vtp(&path, &[(DVec2::NAN, DVec2::ZERO)]).is_err());
+        let _ = fs::remove_dir_all(&dir);
     }
 
     /// The document `write_vtp` would write, in memory.
