@@ -85,7 +85,7 @@ impl StageRegistry {
         P: DeserializeOwned + Serialize + 'static,
         S: Stage + 'static,
     {
-        self.insert(name, summary, build);
+        self.register_read(name, summary, |_, de| erased_serde::deserialize(de), build);
     }
 
     /// As [`StageRegistry::register_checked`], for parameters read with the registry
@@ -93,55 +93,6 @@ impl StageRegistry {
     /// `serde::de::DeserializeSeed` that carries what it needs of the registry, e.g.
     /// [`StageRegistry::terms`]).
     pub fn register_read<P, S, E>(
-        &mut self,
-        name: &str,
-        summary: &'static str,
-        read: impl Fn(
-                &StageRegistry,
-                &mut dyn erased_serde::Deserializer,
-            ) -> Result<P, erased_serde::Error>
-            + Send
-            + Sync
-            + 'static,
-        build: impl Fn(P) -> Result<S, E> + Send + Sync + 'static,
-    ) where
-        P: Serialize + 'static,
-        S: Stage + 'static,
-        E: std::error::Error,
-    {
-        self.insert_read(name, summary, read, build);
-    }
-
-    /// Registers pair term `T` as `name` (CamelCase, as a scenario writes it in
-    /// `Forces(terms: [...])`); it runs in Forces' fused neighbour loop after the
-    /// shipped terms of the list. See [`TermRegistry::register`].
-    pub fn register_term<T>(&mut self, name: &'static str, summary: &'static str)
-    where
-        T: Term + Send + Sync + 'static,
-        T::Params: Send + Sync + 'static,
-    {
-        self.terms.register::<T>(name, summary);
-    }
-
-    /// The pair terms registered by plugins.
-    pub fn terms(&self) -> &TermRegistry {
-        &self.terms
-    }
-
-    fn insert<P, S, E>(
-        &mut self,
-        name: &str,
-        summary: &'static str,
-        build: impl Fn(P) -> Result<S, E> + Send + Sync + 'static,
-    ) where
-        P: DeserializeOwned + Serialize + 'static,
-        S: Stage + 'static,
-        E: std::fmt::Display,
-    {
-        self.insert_read(name, summary, |_, de| erased_serde::deserialize(de), build);
-    }
-
-    fn insert_read<P, S, E>(
         &mut self,
         name: &str,
         summary: &'static str,
@@ -175,6 +126,22 @@ impl StageRegistry {
                 summary,
             }),
         );
+    }
+
+    /// Registers pair term `T` as `name` (CamelCase, as a scenario writes it in
+    /// `Forces(terms: [...])`); it runs in Forces' fused neighbour loop after the
+    /// shipped terms of the list. See [`TermRegistry::register`].
+    pub fn register_term<T>(&mut self, name: &'static str, summary: &'static str)
+    where
+        T: Term + Send + Sync + 'static,
+        T::Params: Send + Sync + 'static,
+    {
+        self.terms.register::<T>(name, summary);
+    }
+
+    /// The pair terms registered by plugins.
+    pub fn terms(&self) -> &TermRegistry {
+        &self.terms
     }
 
     pub fn contains(&self, name: &str) -> bool {
@@ -281,6 +248,33 @@ impl serde::de::Visitor<'_> for Identifier {
     }
     fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<String, E> {
         Ok(v.to_string())
+    }
+}
+
+/// Reads a list `[a, b, ...]` with `seed` for each element (a stateful element reader:
+/// a pipeline entry through the stage registry, a pair term through the term
+/// registry). `.1` says what is expected, for the message when something else is there.
+#[derive(Clone, Copy)]
+pub struct SeqOf<S>(pub S, pub &'static str);
+
+impl<'de, S: serde::de::DeserializeSeed<'de> + Copy> serde::de::DeserializeSeed<'de> for SeqOf<S> {
+    type Value = Vec<S::Value>;
+    fn deserialize<D: serde::Deserializer<'de>>(self, d: D) -> Result<Self::Value, D::Error> {
+        d.deserialize_seq(self)
+    }
+}
+
+impl<'de, S: serde::de::DeserializeSeed<'de> + Copy> serde::de::Visitor<'de> for SeqOf<S> {
+    type Value = Vec<S::Value>;
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str(self.1)
+    }
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Self::Value, A::Error> {
+        let mut list = Vec::new();
+        while let Some(x) = seq.next_element_seed(self.0)? {
+            list.push(x);
+        }
+        Ok(list)
     }
 }
 

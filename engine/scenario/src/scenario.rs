@@ -19,7 +19,7 @@ use crate::lexer::{lex_lenient, Shape, Tok, Token};
 use crate::overrides::{apply_overrides_traced, source_offset, Override, Patch};
 use glam::DVec2;
 use serde::de::{
-    self, DeserializeSeed, Deserializer, EnumAccess, MapAccess, SeqAccess, VariantAccess, Visitor,
+    self, DeserializeSeed, Deserializer, EnumAccess, MapAccess, VariantAccess, Visitor,
 };
 use serde::{Deserialize, Serialize};
 use sph_core::components::{BodyPose, Density, Position, Pressure, Velocity, Wall};
@@ -29,7 +29,7 @@ use sph_core::kernel::KernelKind;
 use sph_core::motion::{Motion, MotionSeries, MotionSpec, Pose, SHORTEST_TIME};
 use sph_core::piston::{Piston, PistonSpec, PISTON_WALL};
 use sph_core::registry::{camel_case, did_you_mean, snake_case, StageRegistry};
-use sph_core::registry::{ron_options, Identifier};
+use sph_core::registry::{ron_options, Identifier, SeqOf};
 use sph_core::sim::{Clock, Constants, Resources, Sim, Tait};
 use sph_core::stage::Stage;
 use sph_core::units::{shown, Positive};

@@ -7,7 +7,7 @@
 
 use crate::rates::{self, Outputs};
 use crate::terms::{
-    artificial_viscosity, plugin_terms, pressure_gradient, PrePass, RateTerms, TermListSeed,
+    artificial_viscosity, plugin_terms, pressure_gradient, term_list_seed, PrePass, RateTerms,
     TermRegistry, TermSpec,
 };
 use serde::de::{self, DeserializeSeed, MapAccess, Visitor};
@@ -69,7 +69,7 @@ impl<'de> Visitor<'de> for ParamsSeed<'_> {
         while let Some(key) = map.next_key_seed(Identifier("a field name"))? {
             match key.as_str() {
                 "terms" if terms.is_some() => return Err(de::Error::duplicate_field("terms")),
-                "terms" => terms = Some(map.next_value_seed(TermListSeed(self.0))?),
+                "terms" => terms = Some(map.next_value_seed(term_list_seed(self.0))?),
                 other => return Err(de::Error::unknown_field(other, FIELDS)),
             }
         }

@@ -27,11 +27,11 @@ pub mod riemann_diffusion;
 pub mod riemann_pressure;
 pub mod shepard;
 
-use serde::de::{self, DeserializeSeed, EnumAccess, SeqAccess, VariantAccess, Visitor};
+use serde::de::{self, DeserializeSeed, EnumAccess, VariantAccess, Visitor};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use sph_core::contract::Access;
 use sph_core::pair::{Fields, Lane, Me, Pair, PluginTerm, RateTerm, Rates};
-use sph_core::registry::{Identifier, ParamError};
+use sph_core::registry::{Identifier, ParamError, SeqOf};
 use sph_core::sim::Constants;
 pub use sph_core::terms::{PrePass, Term, TermParams, TermRegistry};
 
@@ -77,28 +77,11 @@ pub enum TermListError {
 pub struct TermSeed<'a>(pub &'a TermRegistry);
 
 /// Reads a term list, `[Name(...), ...]` ([`TermSeed`] for each).
-#[derive(Clone, Copy)]
-pub struct TermListSeed<'a>(pub &'a TermRegistry);
-
-impl<'de> DeserializeSeed<'de> for TermListSeed<'_> {
-    type Value = Vec<TermSpec>;
-    fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<Vec<TermSpec>, D::Error> {
-        d.deserialize_seq(self)
-    }
-}
-
-impl<'de> Visitor<'de> for TermListSeed<'_> {
-    type Value = Vec<TermSpec>;
-    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-        f.write_str("a list of pair terms, e.g. [PressureGradient(), Continuity()]")
-    }
-    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Vec<TermSpec>, A::Error> {
-        let mut list = Vec::new();
-        while let Some(t) = seq.next_element_seed(TermSeed(self.0))? {
-            list.push(t);
-        }
-        Ok(list)
-    }
+pub fn term_list_seed(terms: &TermRegistry) -> SeqOf<TermSeed<'_>> {
+    SeqOf(
+        TermSeed(terms),
+        "a list of pair terms, e.g. [PressureGradient(), Continuity()]",
+    )
 }
 
 /// Reads a registered term's parameters through the erased deserializer.
@@ -192,16 +175,11 @@ macro_rules! rate_terms {
         impl Serialize for TermSpec {
             /// As a scenario writes it (with the variant newtypes unwrapped).
             fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-                let mut k = 0u32;
-                $(
-                    if let TermSpec::$ty(p) = self {
-                        return s.serialize_newtype_variant("TermSpec", k, stringify!($ty), p);
-                    }
-                    k += 1;
-                )*
+                let (name, k) = (self.name(), SHIPPED.len() as u32);
+                let k = SHIPPED.iter().position(|n| *n == name).map_or(k, |i| i as u32);
                 match self {
-                    TermSpec::Plugin(p) => s.serialize_newtype_variant("TermSpec", k, p.name(), p),
-                    _ => unreachable!("every shipped term returned above"),
+                    $(TermSpec::$ty(p) => s.serialize_newtype_variant("TermSpec", k, name, p),)*
+                    TermSpec::Plugin(p) => s.serialize_newtype_variant("TermSpec", k, name, p),
                 }
             }
         }

@@ -120,7 +120,10 @@ impl<'de> Visitor<'de> for ScenarioSeed<'_> {
                 Key::Pipeline => take!(
                     pipeline,
                     "pipeline",
-                    map.next_value_seed(PipelineSeed(self.0))?
+                    map.next_value_seed(SeqOf(
+                        EntryVisitor(self.0),
+                        "a list of stages, `[NeighbourGrid(), ...]`",
+                    ))?
                 ),
             }
         }
@@ -141,31 +144,6 @@ impl<'de> Visitor<'de> for ScenarioSeed<'_> {
             sweep: sweep.unwrap_or_default(),
             pipeline: pipeline.ok_or_else(required("pipeline"))?,
         })
-    }
-}
-
-/// Reads the pipeline, `[Stage(...), ...]`, each entry through the registry.
-#[derive(Clone, Copy)]
-pub(crate) struct PipelineSeed<'a>(pub(crate) &'a StageRegistry);
-
-impl<'de> DeserializeSeed<'de> for PipelineSeed<'_> {
-    type Value = Vec<PipelineEntry>;
-    fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<Self::Value, D::Error> {
-        d.deserialize_seq(self)
-    }
-}
-
-impl<'de> Visitor<'de> for PipelineSeed<'_> {
-    type Value = Vec<PipelineEntry>;
-    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
-        write!(f, "a list of stages, `[NeighbourGrid(), ...]`")
-    }
-    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Self::Value, A::Error> {
-        let mut entries = Vec::new();
-        while let Some(e) = seq.next_element_seed(EntryVisitor(self.0))? {
-            entries.push(e);
-        }
-        Ok(entries)
     }
 }
 
