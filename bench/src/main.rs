@@ -12,6 +12,7 @@
 
 use clap::{Parser, Subcommand};
 use engine::bench::{parse_count, run_child, BenchArgs, Case, Measurement};
+use engine::BenchError;
 use salva2d::kernel::CubicSplineKernel;
 use salva2d::math::Vector;
 use salva2d::object::interaction_groups::InteractionGroups;
@@ -82,6 +83,34 @@ struct PeerArgs {
     out: PathBuf,
 }
 
+/// Why `sph-bench` failed.
+#[derive(Debug, thiserror::Error)]
+enum PeerError {
+    /// `engine bench`, or one of the engine's runs of `peer`, failed.
+    #[error(transparent)]
+    Bench(#[from] BenchError),
+    /// `--salva-tolerance` is not a fraction between 0 and 1.
+    #[error("--salva-tolerance {tolerance}: expected a fraction of rho_0 between 0 and 1 (salva2d's default 0.05)")]
+    Tolerance { tolerance: f64 },
+    /// salva2d's thread pool could not be built.
+    #[error(transparent)]
+    ThreadPool(#[from] rayon::ThreadPoolBuildError),
+    /// The output folder could not be created.
+    #[error("{source}")]
+    CreateDir {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// `peer.md` could not be written.
+    #[error("{source}")]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
 /// Column width a [m] and height 2a: Martin & Moyce's n^2 = 2.
 const A: f64 = 0.3;
 const TANK: (f64, f64) = (3.22, 1.8);
@@ -150,13 +179,12 @@ fn run_salva(
     end_time: f64,
     rule: SalvaStep,
     tolerance: f64,
-) -> Result<PeerResult, String> {
+) -> Result<PeerResult, PeerError> {
     let ds = A / across as f64;
     let r = (ds / 2.0) as f32;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
-        .build()
-        .map_err(|e| e.to_string())?;
+        .build()?;
     pool.install(|| {
         let mut solver = DFSPHSolver::<CubicSplineKernel, CubicSplineKernel>::new();
         solver.max_density_error = tolerance as f32;
@@ -234,14 +262,15 @@ fn run_salva(
     })
 }
 
-fn peer(args: &PeerArgs) -> Result<(), String> {
+fn peer(args: &PeerArgs) -> Result<(), PeerError> {
     let tolerance = args.salva_tolerance;
     if !(tolerance > 0.0 && tolerance < 1.0) {
-        return Err(format!(
-            "--salva-tolerance {tolerance}: expected a fraction of rho_0 between 0 and 1 (salva2d's default 0.05)"
-        ));
+        return Err(PeerError::Tolerance { tolerance });
     }
-    std::fs::create_dir_all(&args.out).map_err(|e| e.to_string())?;
+    std::fs::create_dir_all(&args.out).map_err(|source| PeerError::CreateDir {
+        path: args.out.clone(),
+        source,
+    })?;
     let bench = BenchArgs {
         sizes: Vec::new(),
         threads: vec![args.threads],
@@ -378,14 +407,17 @@ fn peer(args: &PeerArgs) -> Result<(), String> {
             false => "no overrides".into(),
         }
     );
-    std::fs::write(args.out.join("peer.md"), &md).map_err(|e| e.to_string())?;
+    let path = args.out.join("peer.md");
+    if let Err(source) = std::fs::write(&path, &md) {
+        return Err(PeerError::Write { path, source });
+    }
     println!("{md}");
     Ok(())
 }
 
 fn main() -> ExitCode {
     let result = match Cli::parse().command {
-        Cmd::Bench(args) => engine::bench::main(&args),
+        Cmd::Bench(args) => engine::bench::main(&args).map_err(PeerError::from),
         Cmd::Peer(args) => peer(&args),
     };
     match result {

@@ -11,6 +11,7 @@
 mod report;
 use report::*;
 
+use crate::BenchError;
 use serde::{Deserialize, Serialize};
 use sph_core::components::{Fluid, Position};
 use sph_core::pair::Isa;
@@ -107,7 +108,7 @@ pub struct BenchArgs {
 }
 
 /// The instruction sets `--isa` asks for, checked against this processor's.
-fn requested_isas(asked: &[String]) -> Result<Vec<&'static str>, String> {
+fn requested_isas(asked: &[String]) -> Result<Vec<&'static str>, BenchError> {
     let available: Vec<&'static str> = Isa::available().iter().map(|i| i.name()).collect();
     let mut isas: Vec<&'static str> = Vec::new();
     for name in asked.iter().map(|s| s.trim()) {
@@ -118,14 +119,10 @@ fn requested_isas(asked: &[String]) -> Result<Vec<&'static str>, String> {
             _ => match available.iter().find(|a| **a == name) {
                 Some(a) => vec![*a],
                 None => {
-                    return Err(format!(
-                        "--isa: `{name}` is not an instruction set this processor runs; \
-                         accepted: auto, {}scalar",
-                        available
-                            .iter()
-                            .map(|a| format!("{a}, "))
-                            .collect::<String>()
-                    ))
+                    return Err(BenchError::UnknownIsa {
+                        name: name.to_string(),
+                        available,
+                    })
                 }
             },
         };
@@ -136,7 +133,7 @@ fn requested_isas(asked: &[String]) -> Result<Vec<&'static str>, String> {
         }
     }
     if isas.is_empty() {
-        return Err("--isa: give at least one instruction set (or auto)".into());
+        return Err(BenchError::NoIsa);
     }
     Ok(isas)
 }
@@ -258,7 +255,7 @@ impl Stage for BenchStop {
 }
 
 /// Parses 5k, 20k, 1.28M, 5000.
-pub fn parse_count(s: &str) -> Result<usize, String> {
+pub fn parse_count(s: &str) -> Result<usize, BenchError> {
     let s = s.trim();
     let (num, scale) = match s.chars().last() {
         Some('k' | 'K') => (&s[..s.len() - 1], 1e3),
@@ -269,7 +266,9 @@ pub fn parse_count(s: &str) -> Result<usize, String> {
         .ok()
         .filter(|v| *v > 0.0)
         .map(|v| (v * scale).round() as usize)
-        .ok_or_else(|| format!("`{s}` is not a particle count (e.g. 5k, 20k, 1.28M)"))
+        .ok_or_else(|| BenchError::NotACount {
+            text: s.to_string(),
+        })
 }
 
 fn label(n: usize) -> String {
@@ -311,9 +310,11 @@ impl Case {
             self.particles, self.threads, self.steps, self.end_time
         )
     }
-    fn decode(s: &str) -> Result<Self, String> {
+    fn decode(s: &str) -> Result<Self, BenchError> {
         let v: Vec<&str> = s.split(',').collect();
-        let bad = || format!("bad --child `{s}`");
+        let bad = || BenchError::BadChild {
+            spec: s.to_string(),
+        };
         if v.len() != 4 {
             return Err(bad());
         }
@@ -333,11 +334,13 @@ pub fn run_case(
     sets: &[String],
     extra: &[&str],
     out: &Path,
-) -> Result<Measurement, String> {
+) -> Result<Measurement, BenchError> {
     let base_bytes = proc_status("VmRSS:");
     let heap_base = heap_bytes().0;
-    let mut text =
-        std::fs::read_to_string(scenario).map_err(|e| format!("{}: {e}", scenario.display()))?;
+    let mut text = std::fs::read_to_string(scenario).map_err(|source| BenchError::Read {
+        path: scenario.to_path_buf(),
+        source,
+    })?;
     let mut registry = sph_stages::standard_registry();
     registry.register_checked(
         "bench_stop",
@@ -347,9 +350,7 @@ pub fn run_case(
     let across = ((2 * case.particles) as f64).sqrt().round() as usize;
     let mut overrides: Vec<String> = vec![format!("resolution=ParticlesAcross({across})")];
     // Append BenchStop as the pipeline's last entry: before the file's last `]`.
-    let at = text
-        .rfind(']')
-        .ok_or("the scenario has no pipeline list to append BenchStop to")?;
+    let at = text.rfind(']').ok_or(BenchError::NoPipeline)?;
     text.insert_str(at, &format!("BenchStop(steps: {}),\n", case.steps));
     if case.steps > 0 {
         // BenchStop ends the run; the end time only has to lie beyond the steps (a few
@@ -363,24 +364,23 @@ pub fn run_case(
     overrides.extend(sets.iter().cloned());
     let overrides = overrides
         .iter()
-        .map(|s| s.parse::<Override>().map_err(|e| e.to_string()))
+        .map(|s| s.parse::<Override>())
         .collect::<Result<Vec<_>, _>>()?;
     let scenario = Scenario::from_str(
         &text,
         &scenario.display().to_string(),
         &overrides,
         &registry,
-    )
-    .map_err(|e| e.to_string())?;
+    )?;
     if scenario.spec.pipeline.last().map(|e| e.name.as_str()) != Some("bench_stop") {
-        return Err("BenchStop did not land at the end of the pipeline".into());
+        return Err(BenchError::StopNotLast);
     }
     // Profiled for the per-stage shares.
     let opts = RunOptions {
         profile: true,
         ..RunOptions::quiet(out, case.threads)
     };
-    let (summary, sim) = run_keeping_state(scenario, &opts).map_err(|e| e.to_string())?;
+    let (summary, sim) = run_keeping_state(scenario, &opts)?;
     let end_bytes = proc_status("VmRSS:");
     let heap_peak = heap_bytes().1;
     let heap_end = LIVE_WHILE_STEPPING.load(Ordering::Relaxed);
@@ -476,8 +476,8 @@ pub fn run_child(
     extra: &[&str],
     isa: &str,
     tag: &str,
-) -> Result<Measurement, String> {
-    let exe = std::env::current_exe().map_err(|e| e.to_string())?;
+) -> Result<Measurement, BenchError> {
+    let exe = std::env::current_exe().map_err(BenchError::CurrentExe)?;
     let out = args.out.join("runs").join(tag);
     let mut cmd = Command::new(exe);
     cmd.arg("bench")
@@ -502,30 +502,34 @@ pub fn run_child(
         "scalar" => cmd.env("SPH_NO_SIMD", "1"),
         _ => &mut cmd,
     };
-    let output = cmd.output().map_err(|e| e.to_string())?;
+    let output = cmd.output().map_err(BenchError::Spawn)?;
     let _ = std::fs::remove_dir_all(&out);
     let stdout = String::from_utf8_lossy(&output.stdout);
     let line = stdout.lines().rev().find(|l| l.starts_with('{'));
     match (output.status.success(), line) {
         (true, Some(line)) => {
-            let m: Measurement = serde_json::from_str(line).map_err(|e| e.to_string())?;
+            let m: Measurement = serde_json::from_str(line)?;
             match m.isa == isa {
                 true => Ok(m),
-                false => Err(format!("{tag}: asked for {isa}, the run used {}", m.isa)),
+                false => Err(BenchError::WrongIsa {
+                    tag: tag.to_string(),
+                    asked: isa.to_string(),
+                    used: m.isa,
+                }),
             }
         }
-        _ => Err(format!(
-            "{tag}: {}",
-            String::from_utf8_lossy(&output.stderr).trim()
-        )),
+        _ => Err(BenchError::ChildFailed {
+            tag: tag.to_string(),
+            stderr: String::from_utf8_lossy(&output.stderr).trim().to_string(),
+        }),
     }
 }
 
 /// The child side: run the case given by `--child` and print its measurement.
-fn child_main(spec: &str, args: &BenchArgs) -> Result<(), String> {
+fn child_main(spec: &str, args: &BenchArgs) -> Result<(), BenchError> {
     let case = Case::decode(spec)?;
     let m = run_case(case, &args.scenario, &args.sets, &[], &args.out)?;
-    println!("{}", serde_json::to_string(&m).map_err(|e| e.to_string())?);
+    println!("{}", serde_json::to_string(&m)?);
     Ok(())
 }
 
@@ -547,7 +551,7 @@ const SHOWN: [&str; 7] = [
 const OUTPUTS: [&str; 4] = ["probe", "energy", "vtk_frames", "snapshots"];
 
 /// Runs the whole benchmark; returns the fixed-step and fixed-time measurements.
-pub fn bench(args: &BenchArgs) -> Result<(Vec<Measurement>, Vec<Measurement>), String> {
+pub fn bench(args: &BenchArgs) -> Result<(Vec<Measurement>, Vec<Measurement>), BenchError> {
     if let Some(spec) = &args.child {
         child_main(spec, args)?;
         return Ok((Vec::new(), Vec::new()));
@@ -564,10 +568,13 @@ pub fn bench(args: &BenchArgs) -> Result<(Vec<Measurement>, Vec<Measurement>), S
         .map(|s| parse_count(s))
         .collect::<Result<Vec<_>, _>>()?;
     if args.threads.contains(&0) || args.threads.is_empty() {
-        return Err("--threads: give counts >= 1".into());
+        return Err(BenchError::NoThreads);
     }
     let isas = requested_isas(&args.isa)?;
-    std::fs::create_dir_all(&args.out).map_err(|e| e.to_string())?;
+    std::fs::create_dir_all(&args.out).map_err(|source| BenchError::CreateDir {
+        path: args.out.clone(),
+        source,
+    })?;
     let mut fixed = Vec::new();
     for &n in &sizes {
         for &t in &args.threads {
@@ -612,8 +619,12 @@ pub fn bench(args: &BenchArgs) -> Result<(Vec<Measurement>, Vec<Measurement>), S
         timed.push(m);
     }
     let (csv, md) = (csv_table(&fixed, &timed), markdown(&fixed, &timed, args));
-    std::fs::write(args.out.join("bench.csv"), &csv).map_err(|e| e.to_string())?;
-    std::fs::write(args.out.join("bench.md"), &md).map_err(|e| e.to_string())?;
+    for (name, text) in [("bench.csv", &csv), ("bench.md", &md)] {
+        let path = args.out.join(name);
+        if let Err(source) = std::fs::write(&path, text) {
+            return Err(BenchError::Write { path, source });
+        }
+    }
     let _ = std::fs::remove_dir_all(args.out.join("runs"));
     println!("{md}");
     println!(
@@ -625,7 +636,7 @@ pub fn bench(args: &BenchArgs) -> Result<(Vec<Measurement>, Vec<Measurement>), S
 }
 
 /// Entry point of `engine bench`.
-pub fn main(args: &BenchArgs) -> Result<(), String> {
+pub fn main(args: &BenchArgs) -> Result<(), BenchError> {
     bench(args).map(|_| ())
 }
 
@@ -645,7 +656,7 @@ mod tests {
         }
         let two = requested_isas(&["scalar".into(), "scalar".into()]).unwrap();
         assert_eq!(two, ["scalar"]);
-        let err = requested_isas(&["sse".into()]).unwrap_err();
+        let err = requested_isas(&["sse".into()]).unwrap_err().to_string();
         assert!(err.contains("`sse`") && err.contains("scalar"), "{err}");
         assert!(requested_isas(&[]).is_err());
     }
@@ -674,9 +685,9 @@ mod tests {
 
     #[test]
     fn counts_parse_with_suffixes() {
-        assert_eq!(parse_count("5k"), Ok(5000));
-        assert_eq!(parse_count("1.28M"), Ok(1_280_000));
-        assert_eq!(parse_count("320"), Ok(320));
+        assert_eq!(parse_count("5k").ok(), Some(5000));
+        assert_eq!(parse_count("1.28M").ok(), Some(1_280_000));
+        assert_eq!(parse_count("320").ok(), Some(320));
         assert!(parse_count("lots").is_err());
         assert_eq!(label(1_280_000), "1.28M");
     }

@@ -2,14 +2,17 @@
 //! `engine::main_with(registry)` after registering its stages.
 
 pub mod bench;
+mod error;
 pub mod slurm;
 pub mod study;
+
+pub use error::{BenchError, CliError, SlurmError};
 
 use clap::{Parser, Subcommand};
 use sph_core::checkpoint::Origin;
 use sph_core::StageRegistry;
 use sph_run::runner::{run, RunError, RunOptions};
-use sph_scenario::overrides::Override;
+use sph_scenario::overrides::{Override, OverrideError};
 use sph_scenario::Scenario;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -115,7 +118,7 @@ pub fn main_with(registry: StageRegistry) -> ExitCode {
             }
             Ok(ExitCode::SUCCESS)
         }
-        Some(Command::Bench(args)) => bench::main(&args).map(done),
+        Some(Command::Bench(args)) => bench::main(&args).map(done).map_err(CliError::from),
         Some(Command::Resume(args)) => resume(&args, &registry),
         Some(Command::Study(args)) => study::main(&args, &registry).map(done),
         None => run_scenario(&cli.run, &registry),
@@ -161,12 +164,10 @@ fn interrupt_flag() -> Option<Arc<AtomicBool>> {
 /// "unexpected argument '-1'".
 pub fn count(
     option: &'static str,
-) -> impl Fn(&str) -> Result<usize, String> + Clone + Send + Sync + 'static {
+) -> impl Fn(&str) -> Result<usize, CliError> + Clone + Send + Sync + 'static {
     move |text| match text.trim().parse::<usize>() {
         Ok(n) if n >= 1 => Ok(n),
-        _ => Err(format!(
-            "{option} takes a positive whole number, e.g. {option} 2"
-        )),
+        _ => Err(CliError::NotACount { option }),
     }
 }
 
@@ -174,52 +175,42 @@ pub fn count(
 /// simulated time > 0, with an error that names the option.
 pub fn seconds(
     option: &'static str,
-) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync + 'static {
+) -> impl Fn(&str) -> Result<f64, CliError> + Clone + Send + Sync + 'static {
     move |text| match text.trim().parse::<f64>() {
         Ok(t) if t > 0.0 && t.is_finite() => Ok(t),
-        _ => Err(format!(
-            "{option} takes seconds of simulated time > 0, e.g. {option} 2.5"
-        )),
+        _ => Err(CliError::NotSeconds { option }),
     }
 }
 
 /// The `--set PATH=VALUE` arguments as overrides.
-pub fn parse_sets(sets: &[String]) -> Result<Vec<Override>, String> {
-    sets.iter()
-        .map(|s| s.parse::<Override>().map_err(|e| e.to_string()))
-        .collect()
+pub fn parse_sets(sets: &[String]) -> Result<Vec<Override>, OverrideError> {
+    sets.iter().map(|s| s.parse::<Override>()).collect()
 }
 
 /// Continues a run from the newest usable checkpoint in `args.dir`.
-pub fn resume(args: &ResumeArgs, registry: &StageRegistry) -> Result<ExitCode, String> {
+pub fn resume(args: &ResumeArgs, registry: &StageRegistry) -> Result<ExitCode, CliError> {
     if args.threads == Some(0) {
-        return Err("--threads must be at least 1".into());
+        return Err(CliError::ZeroThreads);
     }
     if !args.dir.is_dir() {
-        let what = match args.dir.exists() {
-            true => "not a folder",
-            false => "no such folder",
-        };
-        return Err(format!(
-            "{}: {what} (expected a run's output folder holding checkpoint.bin, written with --checkpoint-every, --stop-at or at Ctrl-C)",
-            args.dir.display()
-        ));
+        return Err(CliError::NotARunFolder {
+            dir: args.dir.clone(),
+            exists: args.dir.exists(),
+        });
     }
-    let (checkpoint, notes) =
-        sph_core::checkpoint::read_latest(&args.dir).map_err(|e| e.to_string())?;
+    let (checkpoint, notes) = sph_core::checkpoint::read_latest(&args.dir)?;
     for note in notes {
         eprintln!("note: {note}");
     }
     let origin = checkpoint.origin.clone();
     if origin.scenario.as_os_str().is_empty() {
-        return Err(format!(
-            "{}: the checkpoint does not record its scenario file (it was written by a program other than `engine`)",
-            checkpoint.file.display()
-        ));
+        return Err(CliError::NoScenarioRecorded {
+            file: checkpoint.file.clone(),
+        });
     }
     let overrides = parse_sets(&origin.sets)?;
     let scenario = Scenario::load(&origin.scenario, &overrides, registry)
-        .map_err(|e| format!("{e}\n(the scenario the checkpoint was written for)"))?;
+        .map_err(CliError::ResumedScenario)?;
     eprintln!(
         "resuming {} from t = {} s (step {}) in {}",
         origin.scenario.display(),
@@ -243,26 +234,24 @@ pub fn resume(args: &ResumeArgs, registry: &StageRegistry) -> Result<ExitCode, S
 }
 
 /// Loads and runs one scenario, printing the headline figures.
-pub fn run_scenario(args: &RunArgs, registry: &StageRegistry) -> Result<ExitCode, String> {
-    let path = args
-        .scenario
-        .as_ref()
-        .ok_or("give a scenario file, e.g. `engine scenarios/dam_break.ron`")?;
+pub fn run_scenario(args: &RunArgs, registry: &StageRegistry) -> Result<ExitCode, CliError> {
+    let path = args.scenario.as_ref().ok_or(CliError::NoScenario)?;
     let overrides = parse_sets(&args.sets)?;
     if args.threads == Some(0) {
-        return Err("--threads must be at least 1".into());
+        return Err(CliError::ZeroThreads);
     }
-    let scenario = Scenario::load(path, &overrides, registry).map_err(|e| e.to_string())?;
+    let scenario = Scenario::load(path, &overrides, registry)?;
     let out_dir = args
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("out").join(&scenario.spec.name));
     if args.submit.submit.is_some() {
-        return slurm::submit_scenario(args, path, &scenario, &out_dir).map(|()| ExitCode::SUCCESS);
+        slurm::submit_scenario(args, path, &scenario, &out_dir)?;
+        return Ok(ExitCode::SUCCESS);
     }
     if scenario.spec.sweep.is_some() {
         if args.checkpoints.checkpoint_every.is_some() || args.checkpoints.stop_at.is_some() {
-            return Err("--checkpoint-every and --stop-at do not apply to a sweep".into());
+            return Err(CliError::CheckpointsInSweep);
         }
         return run_sweep(path, &overrides, registry, &out_dir, args.threads)
             .map(|()| ExitCode::SUCCESS);
@@ -287,14 +276,16 @@ pub fn run_scenario(args: &RunArgs, registry: &StageRegistry) -> Result<ExitCode
 
 /// Runs a loaded scenario and prints the headline figures; the exit code is
 /// [`INTERRUPTED`] after a Ctrl-C (with its checkpoint written).
-fn execute(scenario: Scenario, opts: &RunOptions) -> Result<ExitCode, String> {
+fn execute(scenario: Scenario, opts: &RunOptions) -> Result<ExitCode, CliError> {
     let out_dir = &opts.out_dir;
     let waves = sph_study::waves::WaveTheory::from_scenario(&scenario);
-    let result = run(scenario, opts);
-    let summary = match &result {
-        Ok(s) => s.clone(),
-        Err(RunError::Step { summary, .. }) => (**summary).clone(),
-        Err(e) => return Err(e.to_string()),
+    // A failed step still has a summary to print; any other failure has none.
+    let (summary, stopped) = match run(scenario, opts) {
+        Ok(summary) => (summary, None),
+        Err(e) => match &e {
+            RunError::Step { summary, .. } => ((**summary).clone(), Some(e)),
+            _ => return Err(CliError::Run(e)),
+        },
     };
     if opts.profile {
         println!("{}", summary.profile_table());
@@ -310,24 +301,21 @@ fn execute(scenario: Scenario, opts: &RunOptions) -> Result<ExitCode, String> {
         summary.threads,
         out_dir.display()
     );
-    if summary.status != "completed" && result.is_ok() {
+    if summary.status != "completed" && stopped.is_none() {
         println!("{}", summary.status);
     }
     if let (Some(waves), true) = (&waves, summary.status == "completed") {
         report_waves(waves, out_dir)?;
     }
     let interrupted = summary.status.starts_with("interrupted");
-    result
-        .map(|_| match interrupted {
-            true => ExitCode::from(INTERRUPTED),
-            false => ExitCode::SUCCESS,
-        })
-        .map_err(|e| {
-            format!(
-                "{e}\n(outputs written so far are kept in {})",
-                out_dir.display()
-            )
-        })
+    match stopped {
+        Some(error) => Err(CliError::Stopped {
+            error: Box::new(error),
+            out_dir: out_dir.clone(),
+        }),
+        None if interrupted => Ok(ExitCode::from(INTERRUPTED)),
+        None => Ok(ExitCode::SUCCESS),
+    }
 }
 
 /// A piston flume's gauges against Biesel and the dispersion relation: a line on the
@@ -335,15 +323,16 @@ fn execute(scenario: Scenario, opts: &RunOptions) -> Result<ExitCode, String> {
 fn report_waves(
     waves: &sph_study::waves::WaveTheory,
     out_dir: &std::path::Path,
-) -> Result<(), String> {
+) -> Result<(), CliError> {
     let probes = out_dir.join("probes.csv");
     if !probes.exists() {
         return Ok(());
     }
-    let report = waves.measure(&probes).map_err(|e| e.to_string())?;
+    let report = waves.measure(&probes)?;
     let path = out_dir.join("waves.md");
-    sph_core::atomic::write_atomic(&path, report.markdown().as_bytes())
-        .map_err(|e| format!("{}: {e}", path.display()))?;
+    if let Err(source) = sph_core::atomic::write_atomic(&path, report.markdown().as_bytes()) {
+        return Err(CliError::Write { path, source });
+    }
     println!("{} (waves.md)", report.summary());
     Ok(())
 }
@@ -355,7 +344,7 @@ fn run_sweep(
     registry: &StageRegistry,
     out_dir: &std::path::Path,
     threads: Option<usize>,
-) -> Result<(), String> {
+) -> Result<(), CliError> {
     let workers = threads.unwrap_or_else(|| {
         std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
     });
@@ -363,8 +352,7 @@ fn run_sweep(
     let responses =
         sph_study::sweep::run_sweep(path, overrides, registry, out_dir, workers, &|line| {
             println!("{line}")
-        })
-        .map_err(|e| e.to_string())?;
+        })?;
     println!(
         "sweep: {} cases in {:.1} s wall on {workers} workers; response.csv and response.png in {}",
         responses.len(),

@@ -5,6 +5,7 @@
 //! only, as the jobs run on other nodes: the output folder must be on a filesystem
 //! every node sees. `--dry-run` writes them without submitting.
 
+use crate::SlurmError;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -94,19 +95,25 @@ fn quote_path(p: &Path) -> String {
 }
 
 /// The engine binary, absolute, for the scripts.
-fn engine_exe() -> Result<PathBuf, String> {
+fn engine_exe() -> Result<PathBuf, SlurmError> {
     std::env::current_exe()
         .and_then(std::fs::canonicalize)
-        .map_err(|e| format!("cannot tell where this engine binary is, for the job scripts: {e}"))
+        .map_err(SlurmError::EngineExe)
+}
+
+/// A [`SlurmError::File`] at `path`, for `map_err`.
+fn at(path: &Path) -> impl FnOnce(std::io::Error) -> SlurmError + '_ {
+    move |source| SlurmError::File {
+        path: path.to_path_buf(),
+        source,
+    }
 }
 
 /// Checks the `--sbatch` options: each one sbatch option, on one line.
-fn check_options(options: &[String]) -> Result<(), String> {
+fn check_options(options: &[String]) -> Result<(), SlurmError> {
     for o in options {
         if !o.starts_with('-') || o.contains(['\n', '\r']) {
-            return Err(format!(
-                "--sbatch {o:?}: give one sbatch option per --sbatch, starting with `-`, e.g. --sbatch=--partition=long"
-            ));
+            return Err(SlurmError::BadOption { option: o.clone() });
         }
     }
     Ok(())
@@ -122,20 +129,18 @@ fn header(ours: &[String], user: &[String]) -> String {
 }
 
 /// Writes an executable script.
-fn write_script(path: &Path, text: &str) -> Result<(), String> {
-    sph_core::atomic::write_atomic(path, text.as_bytes())
-        .map_err(|e| format!("{}: {e}", path.display()))?;
+fn write_script(path: &Path, text: &str) -> Result<(), SlurmError> {
+    sph_core::atomic::write_atomic(path, text.as_bytes()).map_err(at(path))?;
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;
-        std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o755))
-            .map_err(|e| format!("{}: {e}", path.display()))?;
+        std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o755)).map_err(at(path))?;
     }
     Ok(())
 }
 
 /// Runs `sbatch --parsable ARGS SCRIPT` and returns the job id.
-fn sbatch(args: &[String], script: &Path) -> Result<String, String> {
+fn sbatch(args: &[String], script: &Path) -> Result<String, SlurmError> {
     let shown = format!(
         "sbatch --parsable {}{}",
         args.iter().map(|a| quote(a) + " ").collect::<String>(),
@@ -147,34 +152,35 @@ fn sbatch(args: &[String], script: &Path) -> Result<String, String> {
         .arg(script)
         .output()
         .map_err(|e| match e.kind() {
-            std::io::ErrorKind::NotFound => "sbatch not found: --submit slurm needs Slurm's commands \
-                 on PATH (on a login node of the cluster); --dry-run writes the scripts without submitting"
-                .to_string(),
-            _ => format!("{shown}: {e}"),
+            std::io::ErrorKind::NotFound => SlurmError::SbatchNotFound(e),
+            _ => SlurmError::SbatchSpawn {
+                command: shown.clone(),
+                source: e,
+            },
         })?;
     let stdout = String::from_utf8_lossy(&out.stdout);
     let stderr = String::from_utf8_lossy(&out.stderr);
     if !out.status.success() {
-        return Err(format!(
-            "{shown} failed ({}): {}",
-            out.status,
-            stderr.trim()
-        ));
+        return Err(SlurmError::SbatchFailed {
+            command: shown,
+            status: out.status,
+            stderr: stderr.trim().to_string(),
+        });
     }
     // --parsable prints `jobid` or `jobid;cluster`.
     let id = stdout.trim().split(';').next().unwrap_or("").to_string();
     if id.is_empty() || !id.chars().all(|c| c.is_ascii_digit()) {
-        return Err(format!(
-            "{shown}: expected a job id, sbatch printed {:?} {:?}",
-            stdout.trim(),
-            stderr.trim()
-        ));
+        return Err(SlurmError::NoJobId {
+            command: shown,
+            stdout: stdout.trim().to_string(),
+            stderr: stderr.trim().to_string(),
+        });
     }
     Ok(id)
 }
 
 /// Appends a line to `<slurm_dir>/jobs.txt`, the submitted jobs `--status` reports.
-fn record_job(slurm_dir: &Path, line: &str) -> Result<(), String> {
+fn record_job(slurm_dir: &Path, line: &str) -> Result<(), SlurmError> {
     use std::io::Write as _;
     let path = slurm_dir.join("jobs.txt");
     std::fs::OpenOptions::new()
@@ -182,7 +188,7 @@ fn record_job(slurm_dir: &Path, line: &str) -> Result<(), String> {
         .append(true)
         .open(&path)
         .and_then(|mut f| writeln!(f, "{line}"))
-        .map_err(|e| format!("{}: {e}", path.display()))
+        .map_err(at(&path))
 }
 
 /// The last submission recorded in `<out>/slurm/jobs.txt`, for `--status`.
@@ -222,16 +228,15 @@ fn study_args(engine: &Path, job: &StudyJob, study: &Path, out: &Path) -> String
 
 /// Writes `<out>/slurm/cases.sbatch` (the job array, one task per pending case) and
 /// `report.sbatch`, and submits them unless `dry_run`. Returns what to print.
-pub fn submit_study(job: &StudyJob, submit: &SubmitArgs) -> Result<String, String> {
+pub fn submit_study(job: &StudyJob, submit: &SubmitArgs) -> Result<String, SlurmError> {
     check_options(&submit.sbatch)?;
     let engine = engine_exe()?;
-    let study = std::fs::canonicalize(job.study_file)
-        .map_err(|e| format!("{}: {e}", job.study_file.display()))?;
-    std::fs::create_dir_all(job.out).map_err(|e| format!("{}: {e}", job.out.display()))?;
-    let out = std::fs::canonicalize(job.out).map_err(|e| format!("{}: {e}", job.out.display()))?;
-    let cwd = std::env::current_dir().map_err(|e| format!("the current folder: {e}"))?;
+    let study = std::fs::canonicalize(job.study_file).map_err(at(job.study_file))?;
+    std::fs::create_dir_all(job.out).map_err(at(job.out))?;
+    let out = std::fs::canonicalize(job.out).map_err(at(job.out))?;
+    let cwd = std::env::current_dir().map_err(SlurmError::CurrentDir)?;
     let dir = out.join("slurm");
-    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    std::fs::create_dir_all(&dir).map_err(at(&dir))?;
     let common = study_args(&engine, job, &study, &out);
     let threads = "\"${SLURM_CPUS_PER_TASK:-1}\"";
     let cases_script = dir.join("cases.sbatch");
@@ -375,16 +380,15 @@ pub struct RunJob<'a> {
 
 /// Writes `<out>/slurm/run.sbatch`, a requeueable job that starts the run, or resumes it
 /// from its checkpoint when requeued, and submits it unless `dry_run`.
-pub fn submit_run(job: &RunJob, submit: &SubmitArgs) -> Result<String, String> {
+pub fn submit_run(job: &RunJob, submit: &SubmitArgs) -> Result<String, SlurmError> {
     check_options(&submit.sbatch)?;
     let engine = quote_path(&engine_exe()?);
-    let scenario = std::fs::canonicalize(job.scenario)
-        .map_err(|e| format!("{}: {e}", job.scenario.display()))?;
-    std::fs::create_dir_all(job.out).map_err(|e| format!("{}: {e}", job.out.display()))?;
-    let out = std::fs::canonicalize(job.out).map_err(|e| format!("{}: {e}", job.out.display()))?;
-    let cwd = std::env::current_dir().map_err(|e| format!("the current folder: {e}"))?;
+    let scenario = std::fs::canonicalize(job.scenario).map_err(at(job.scenario))?;
+    std::fs::create_dir_all(job.out).map_err(at(job.out))?;
+    let out = std::fs::canonicalize(job.out).map_err(at(job.out))?;
+    let cwd = std::env::current_dir().map_err(SlurmError::CurrentDir)?;
     let dir = out.join("slurm");
-    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    std::fs::create_dir_all(&dir).map_err(at(&dir))?;
     let script = dir.join("run.sbatch");
     let warn = warning(&submit.sbatch);
     let opts = vec![
@@ -496,24 +500,19 @@ pub fn submit_scenario(
     path: &Path,
     scenario: &sph_scenario::Scenario,
     out: &Path,
-) -> Result<(), String> {
+) -> Result<(), SlurmError> {
     if scenario.spec.sweep.is_some() {
-        return Err(format!(
-            "{}: --submit slurm runs one scenario with checkpoints; a sweep does not checkpoint: run it here",
-            path.display()
-        ));
+        return Err(SlurmError::Sweep {
+            path: path.to_path_buf(),
+        });
     }
     if args.profile || args.trace.is_some() {
-        return Err("--profile and --trace do not apply to --submit: the job runs quietly".into());
+        return Err(SlurmError::ProfileOrTrace);
     }
     let end = scenario.spec.end_time.0;
     let checkpoint_every = match args.checkpoints.checkpoint_every {
         Some(s) if s > 0.0 && s.is_finite() => s,
-        Some(s) => {
-            return Err(format!(
-                "--checkpoint-every {s}: give a positive number of simulated seconds"
-            ))
-        }
+        Some(seconds) => return Err(SlurmError::CheckpointEvery { seconds }),
         None => end / 10.0,
     };
     let job = RunJob {
@@ -568,7 +567,9 @@ mod tests {
     #[test]
     fn sbatch_options_are_one_option_each() {
         assert!(check_options(&["--partition=long".into(), "-t 10".into()]).is_ok());
-        let e = check_options(&["partition=long".into()]).unwrap_err();
+        let e = check_options(&["partition=long".into()])
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("starting with `-`"), "{e}");
         assert!(check_options(&["--x\n#SBATCH --y".into()]).is_err());
     }

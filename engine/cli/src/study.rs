@@ -1,6 +1,7 @@
 //! `engine study FILE`: runs (or resumes) a sensitivity study and writes study.csv,
 //! report.md and the figures (see `sph_study::study`).
 
+use crate::CliError;
 use sph_core::StageRegistry;
 use sph_study::study::{find_case, run_one_case, run_study, status, Study, StudyOptions};
 use std::path::PathBuf;
@@ -42,11 +43,11 @@ pub struct StudyArgs {
 }
 
 /// Runs the study and prints one line per case and where the results are.
-pub fn main(args: &StudyArgs, registry: &StageRegistry) -> Result<(), String> {
+pub fn main(args: &StudyArgs, registry: &StageRegistry) -> Result<(), CliError> {
     let overrides = crate::parse_sets(&args.sets)?;
-    let study = Study::load(&args.study, &overrides, registry).map_err(|e| e.to_string())?;
+    let study = Study::load(&args.study, &overrides, registry)?;
     if args.workers == Some(0) || args.threads == Some(0) {
-        return Err("--workers and --threads must be at least 1".into());
+        return Err(CliError::ZeroWorkersOrThreads);
     }
     // Cases side by side, one thread each: independent runs scale without any
     // synchronisation, a small case split over threads does not (docs/studies.md).
@@ -60,14 +61,15 @@ pub fn main(args: &StudyArgs, registry: &StageRegistry) -> Result<(), String> {
         .clone()
         .unwrap_or_else(|| PathBuf::from("out/studies").join(&study.spec.name));
     if args.status {
-        return status(&study, &out);
+        status(&study, &out);
+        return Ok(());
     }
     if let Some(k) = &args.case {
         return one_case(&study, k, &out, args.threads.unwrap_or(cores), registry);
     }
     if args.submit.submit.is_some() {
         if args.report_only {
-            return Err("--report-only runs nothing: drop it from --submit, whose report job writes the report".into());
+            return Err(CliError::ReportOnlySubmit);
         }
         let pending = status::pending_cases(&study, &out);
         let job = crate::slurm::StudyJob {
@@ -94,8 +96,7 @@ pub fn main(args: &StudyArgs, registry: &StageRegistry) -> Result<(), String> {
         threads,
         report_only: args.report_only,
     };
-    let rows = run_study(&study, registry, &out, opts, &|line| println!("{line}"))
-        .map_err(|e| e.to_string())?;
+    let rows = run_study(&study, registry, &out, opts, &|line| println!("{line}"))?;
     let completed = |fallback: bool| {
         let of = rows.iter().filter(|r| r.case.fallback == fallback);
         (of.clone().filter(|r| r.completed()).count(), of.count())
@@ -127,8 +128,8 @@ fn one_case(
     out: &std::path::Path,
     threads: usize,
     registry: &StageRegistry,
-) -> Result<(), String> {
-    let index = find_case(study, k).map_err(|e| e.to_string())?;
+) -> Result<(), CliError> {
+    let index = find_case(study, k)?;
     let n = study.cases.len();
     let name = &study.cases[index].name;
     let dir = out.join(name);
@@ -138,7 +139,7 @@ fn one_case(
         index + 1,
         dir.display()
     );
-    let rows = run_one_case(study, index, out, threads, registry).map_err(|e| e.to_string())?;
+    let rows = run_one_case(study, index, out, threads, registry)?;
     for (ran, row) in rows {
         let name = &row.case.name;
         if ran {
@@ -161,7 +162,7 @@ fn one_case(
 }
 
 /// `--status`: the cases' table, and the last Slurm submission if there was one.
-fn status(study: &Study, out: &std::path::Path) -> Result<(), String> {
+fn status(study: &Study, out: &std::path::Path) {
     let states = status::study_status(study, out);
     let fallbacks = status::fallback_status(study, out, &states);
     println!("study {} in {}:", study.spec.name, out.display());
@@ -172,5 +173,4 @@ fn status(study: &Study, out: &std::path::Path) -> Result<(), String> {
             out.join("slurm").join("jobs.txt").display()
         );
     }
-    Ok(())
 }

@@ -161,9 +161,9 @@ pub fn apply_overrides_traced(
         ov.check()?;
         let root = document(&text).map_err(|e| e.locate(&text, &ov.raw))?;
         let (range, replacement, holders) =
-            resolve(&text, &root, ov).map_err(|reason| OverrideError::Path {
+            resolve(&text, &root, ov).map_err(|e| OverrideError::Path {
                 raw: ov.raw.clone(),
-                reason,
+                reason: e.to_string(),
             })?;
         let len = replacement.len();
         text.replace_range(range.clone(), &replacement);

@@ -77,37 +77,41 @@ impl<'a> Body<'a> {
     }
 
     /// Explains a failed selection of `ov.path[i]` within `here`.
-    pub(crate) fn explain(&self, miss: Miss, here: &str, ov: &Override, i: usize) -> String {
-        let (seg, item) = (&ov.path[i], self.shape.item());
+    pub(crate) fn explain(&self, miss: Miss, here: &str, ov: &Override, i: usize) -> ResolveError {
+        let (seg, item) = (ov.path[i].clone(), self.shape.item());
+        let here = here.to_owned();
         match miss {
-            Miss::OutOfRange(n) => {
-                let len = self.entries.iter().filter(|e| e.key.is_none()).count();
-                format!("index {n} is out of range: {here} has {len} {item}s")
-            }
+            Miss::OutOfRange(index) => ResolveError::OutOfRange {
+                index,
+                here,
+                len: self.entries.iter().filter(|e| e.key.is_none()).count(),
+                item,
+            },
             Miss::Ambiguous(hits) => {
                 let mut path = ov.path.clone();
-                path[i] = hits[0].to_string();
-                let hits: Vec<String> = hits.iter().map(usize::to_string).collect();
-                format!(
-                    "`{seg}` matches {item}s {} of {here}; select one by index, e.g. `--set {}={}`",
-                    hits.join(", "),
-                    path.join("."),
-                    ov.value
-                )
+                path[i] = hits.first().map(usize::to_string).unwrap_or_default();
+                ResolveError::Ambiguous {
+                    seg,
+                    item,
+                    hits,
+                    here,
+                    example: format!("{}={}", path.join("."), ov.value),
+                }
             }
             Miss::Absent => {
                 let labels = self.labels();
                 if labels.is_empty() {
-                    return format!("no {item} `{seg}` in {here}, which is empty");
+                    return ResolveError::Empty { seg, item, here };
                 }
                 let names = labels.iter().filter(|l| l.parse::<usize>().is_err());
-                let nearest = did_you_mean(seg, names.map(String::as_str))
-                    .map(|l| format!("; did you mean `{l}`?"))
-                    .unwrap_or_default();
-                format!(
-                    "no {item} `{seg}` in {here}; {item}s are: {}{nearest}",
-                    labels.join(", ")
-                )
+                let nearest = did_you_mean(seg.as_str(), names.map(String::as_str));
+                ResolveError::Absent {
+                    nearest: nearest.map(str::to_owned),
+                    seg,
+                    item,
+                    here,
+                    labels,
+                }
             }
         }
     }
@@ -295,8 +299,66 @@ pub(crate) fn single_value(text: &str) -> Result<(), SyntaxError> {
 /// each path segment, the range of the struct, list or map that holds it.
 pub(crate) type Edit = (Range<usize>, String, Vec<Range<usize>>);
 
+/// Why an override's path selects nothing in the scenario; the message is the reason of
+/// [`OverrideError::Path`]. `here` names the value searched: `the scenario` or a
+/// path in backquotes.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub(crate) enum ResolveError {
+    /// A segment goes into a value that is not a struct, list or map (`text`).
+    #[error("{here} is `{text}`, not a struct, list or map, so it has no `{seg}`")]
+    NotAContainer {
+        here: String,
+        text: String,
+        seg: String,
+    },
+    /// A list index at or past the end of the `len` positional entries.
+    #[error("index {index} is out of range: {here} has {len} {item}s")]
+    OutOfRange {
+        index: usize,
+        here: String,
+        len: usize,
+        item: &'static str,
+    },
+    /// An element name that several elements (indices `hits`) answer to; `example` is
+    /// the override with the first of them, `path=value`.
+    #[error(
+        "`{seg}` matches {item}s {} of {here}; select one by index, e.g. `--set {example}`",
+        hits.iter().map(usize::to_string).collect::<Vec<_>>().join(", ")
+    )]
+    Ambiguous {
+        seg: String,
+        item: &'static str,
+        hits: Vec<usize>,
+        here: String,
+        example: String,
+    },
+    /// No entry of that name in an empty struct, list or map.
+    #[error("no {item} `{seg}` in {here}, which is empty")]
+    Empty {
+        seg: String,
+        item: &'static str,
+        here: String,
+    },
+    /// No entry of that name; `labels` are the entries there, `nearest` the closest name.
+    #[error(
+        "no {item} `{seg}` in {here}; {item}s are: {}{}",
+        labels.join(", "),
+        nearest.as_ref().map(|l| format!("; did you mean `{l}`?")).unwrap_or_default()
+    )]
+    Absent {
+        seg: String,
+        item: &'static str,
+        here: String,
+        labels: Vec<String>,
+        nearest: Option<String>,
+    },
+    /// The override has no path segment.
+    #[error("empty path")]
+    EmptyPath,
+}
+
 /// Finds the [`Edit`] of an override.
-pub(crate) fn resolve(src: &str, root: &Node<'_>, ov: &Override) -> Result<Edit, String> {
+pub(crate) fn resolve(src: &str, root: &Node<'_>, ov: &Override) -> Result<Edit, ResolveError> {
     let value = &ov.value;
     let mut node = root;
     let mut holders = Vec::new();
@@ -314,10 +376,11 @@ pub(crate) fn resolve(src: &str, root: &Node<'_>, ov: &Override) -> Result<Edit,
                     format!("{name}({seg}: {value})"),
                     holders,
                 )),
-                _ => Err(format!(
-                    "{here} is `{}`, not a struct, list or map, so it has no `{seg}`",
-                    &src[node.span.clone()]
-                )),
+                _ => Err(ResolveError::NotAContainer {
+                    here,
+                    text: src[node.span.clone()].to_owned(),
+                    seg: seg.clone(),
+                }),
             };
         };
         match body.select(seg) {
@@ -337,5 +400,5 @@ pub(crate) fn resolve(src: &str, root: &Node<'_>, ov: &Override) -> Result<Edit,
             Err(miss) => return Err(body.explain(miss, &here, ov, i)),
         }
     }
-    Err("empty path".to_owned())
+    Err(ResolveError::EmptyPath)
 }
