@@ -9,6 +9,7 @@
 //! `Integrate` advances the state (`Shifting` may then regularise the positions), then `Energy`, `VtkFrames` and `Snapshots` report.
 
 pub mod terms;
+pub mod vocab;
 
 pub mod neighbours;
 pub use neighbours::{neighbour_grid, scan, sort_particles};

@@ -1,14 +1,15 @@
 //! Walls that do not slip (`GhostWalls(slip: NoSlip)`): a ghost's `Velocity`, which
 //! continuity and the pressure solves read, mirrors the normal component only, and the
-//! viscous terms read the no-slip mirror (`vocab::NoSlipVelocities`; Adami, Hu & Adams
+//! viscous terms read the no-slip mirror (`vocab::NoSlipVelocity`; Adami, Hu & Adams
 //! 2012, sec. 2.3). Reversing the tangential velocity in the continuity equation too
 //! made a surge along the floor look compressed or stretched there: the DFSPH dam
 //! break blew up at t = 0.46 s and the WCSPH one stopped on the density guard at 0.58 s
 //! (docs/validation.md, "Walls that do not slip").
 
 use sph_core::components::{Fluid, Ghost, Position, Velocity};
-use sph_core::vocab::NoSlipVelocities;
+use sph_core::pair::Columns;
 use sph_core::world::{archetype, column};
+use sph_stages::vocab::NoSlipVelocity;
 use sph_tests::support::{interpolate, load, reference, run_completed, surge_front};
 
 const DAM_BREAK: &str = include_str!("../../scenarios/dam_break.ron");
@@ -29,7 +30,7 @@ fn column_overrides(across: usize, end_time: f64) -> Vec<String> {
 
 /// The mirrors themselves, after a DFSPH surge of 0.1 s. The ghosts are placed at the
 /// start of a step and the solves and the non-pressure step carry each change of a
-/// source's velocity to its ghost's (`GhostReflections`, `NoSlipVelocities::sign`);
+/// source's velocity to its ghost's (`GhostReflections`, `NoSlipSigns`);
 /// `Advance` moves the particles without changing velocities. So at the end, in the
 /// fixed tank (v_w = 0), a ghost across the floor has Velocity (v_x, -v_y), across a
 /// side wall (-v_x, v_y), across both (a corner's double mirror) -v, and its no-slip
@@ -53,9 +54,10 @@ fn ghosts_mirror_the_normal_velocity_and_reverse_all_of_it_for_the_viscous_terms
     );
     let no_slip = sim
         .resources
-        .get::<NoSlipVelocities>()
-        .expect("NoSlip walls insert the no-slip velocities");
-    assert_eq!(no_slip.velocity.len(), source.len());
+        .get::<Columns>()
+        .and_then(|c| c.get::<NoSlipVelocity>())
+        .expect("NoSlip walls store the no-slip velocities");
+    assert_eq!(no_slip.len(), source.len());
     let (mut floor, mut side, mut corner, mut moving) = (0, 0, 0, 0);
     for k in 0..source.len() {
         let v = fv[source[k].source as usize].0;
@@ -78,10 +80,7 @@ fn ghosts_mirror_the_normal_velocity_and_reverse_all_of_it_for_the_viscous_terms
             (false, false) => panic!("ghost {k} at {x} is inside the tank"),
         };
         assert_eq!(gv[k].0, kinematic, "ghost {k} at {x}: Velocity");
-        assert_eq!(
-            no_slip.velocity[k], viscous,
-            "ghost {k} at {x}: no-slip velocity"
-        );
+        assert_eq!(no_slip[k], viscous, "ghost {k} at {x}: no-slip velocity");
         moving += usize::from(v.x.abs() > 0.01 && v.y.abs() > 0.01);
     }
     // Every kind of mirror was checked, on sources that move in both directions.
@@ -122,11 +121,11 @@ fn kept_ghosts_pair_their_velocities_after_a_particle_sort() {
         column::<Position>(ghost).unwrap(),
         column::<Velocity>(ghost).unwrap(),
     );
-    let no_slip = &sim
+    let no_slip = sim
         .resources
-        .get::<NoSlipVelocities>()
-        .expect("no-slip")
-        .velocity;
+        .get::<Columns>()
+        .and_then(|c| c.get::<NoSlipVelocity>())
+        .expect("no-slip");
     assert_eq!(no_slip.len(), gv.len());
     let mut moving = 0;
     for k in 0..gv.len() {

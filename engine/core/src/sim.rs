@@ -4,7 +4,7 @@
 use crate::kernel::KernelKind;
 use glam::DVec2;
 use std::any::{Any, TypeId};
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::PathBuf;
 
 /// Simulated time and step counter.
@@ -171,6 +171,14 @@ impl Resources {
     pub fn contains<T: Any + Send + Sync>(&self) -> bool {
         self.map.contains_key(&TypeId::of::<T>())
     }
+    /// The resource of type `T`, inserted as its default first if absent.
+    pub fn get_or_default<T: Any + Send + Sync + Default>(&mut self) -> &mut T {
+        self.map
+            .entry(TypeId::of::<T>())
+            .or_insert_with(|| Box::new(T::default()))
+            .downcast_mut()
+            .expect("the entry under T's TypeId holds a T")
+    }
     /// Takes a resource out (to borrow it alongside the world), to be put back with
     /// [`Resources::insert`].
     pub fn take<T: Any + Send + Sync>(&mut self) -> Option<T> {
@@ -192,5 +200,26 @@ pub struct Sim {
     /// Scenario name, for titles.
     pub name: String,
     /// Named run diagnostics (e.g. `wall_reflections`), written to summary.json.
-    pub diagnostics: std::collections::BTreeMap<String, f64>,
+    pub diagnostics: BTreeMap<String, f64>,
+}
+
+/// A count kept over a run and reported in summary.json's diagnostics (a safeguard's
+/// actions, particles a filter left alone, ...), keyed by type: the stage that counts
+/// declares it in its [`crate::contract::Access`] (`writes::<C>()`), one that reads it
+/// (`uses::<C>()`), and both name it by type, not by string. Kept in the sim's
+/// `diagnostics` (so in checkpoints), which the methods take rather than the whole sim
+/// so that a stage can count while it holds the world's columns.
+pub trait Counter: 'static {
+    /// Its name in summary.json.
+    const NAME: &'static str;
+    /// Adds `n` (a counter that never counted stays out of the summary).
+    fn add(diagnostics: &mut BTreeMap<String, f64>, n: u64) {
+        if n > 0 {
+            *diagnostics.entry(Self::NAME.into()).or_insert(0.0) += n as f64;
+        }
+    }
+    /// The count so far in the run.
+    fn counted(diagnostics: &BTreeMap<String, f64>) -> f64 {
+        diagnostics.get(Self::NAME).copied().unwrap_or(0.0)
+    }
 }

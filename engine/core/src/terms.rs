@@ -36,8 +36,8 @@ pub trait Term: RateTerm + Sized {
     }
     /// The term for a run with constants `c`, from checked parameters.
     fn build(p: &Self::Params, c: &Constants) -> Self;
-    /// For a viscous term: read the ghosts' no-slip velocities (`Field::ShearVx`,
-    /// `ShearVy`; the walls do not slip) instead of their `Vx`, `Vy`. Other terms
+    /// For a viscous term: read the ghosts' no-slip velocities (the physics crate's
+    /// `NoSlipVelocity` column; the walls do not slip) instead of their `Vx`, `Vy`. Other terms
     /// ignore it.
     fn wall_shear(&mut self) {}
     /// The pass the term needs before the loop, if any; run once per step however

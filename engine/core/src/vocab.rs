@@ -8,25 +8,12 @@
 //! - [`HalfVelocity`], [`HalfDensity`]: the leapfrog's half-step state, per fluid
 //!   particle. Produced by `Integrate`; `Reinitialise` shifts the density, `DampingZone`
 //!   damps the velocity.
-//! - [`ViscousDissipation`]: the artificial viscosity's dissipation rate, asked for by
-//!   `Energy` and filled in by `Forces`.
-//! - [`DensityGradients`]: the renormalised density gradients of fluid and ghosts,
-//!   written by `Forces` for its delta-SPH term.
-//! - [`DiffusionPower`]: the internal-energy change rate of a density diffusion,
-//!   asked for by `Energy` and filled in by `Forces`.
-//! - [`WallPower`]: the rate of work the walls do on the fluid through the ghosts,
-//!   asked for by `Energy` and filled in by `Forces`.
-//! - [`GuardPower`]: the energy the safeguards (reflections, density floor) add,
-//!   asked for by `Energy` and filled in by `Integrate`.
 //! - [`Guarded`]: per fluid particle, which safeguards have acted on it (`Integrate`
 //!   sets, `Probe` reads).
 //! - [`ArtificialViscosity`]: the viscosity coefficients the momentum stage exposes
 //!   (for a sweep's linear-theory damping).
-//! - [`ContinuityInPipeline`]: marks that a continuity stage writes the density rate.
-//! - [`GhostSettings`], [`refresh_ghost_density`]: how ghost densities follow their
-//!   sources (for a stage that changes fluid densities after the ghosts were placed).
-//! - [`GhostReflections`], [`NoSlipVelocities`]: how ghost velocities follow their
-//!   sources', and the ghosts' no-slip velocities for the viscous terms.
+//! - Keyed columns ([`crate::pair::Columns`]): per-particle quantities a stage computes
+//!   for pair terms to read.
 //! - [`require_neighbours`]: the setup check of the stages that sum over neighbours.
 //!
 //! - The scene as the world holds it, re-exported here: [`WallPose`] (each wall now),
@@ -36,15 +23,16 @@
 //!   [`Piston`] (the marker a stage finds the piston by).
 //!
 //! The particle components (`Position`, `Density`, ...) are in [`crate::components`].
+//! What one scheme's stages share (the DFSPH factors, the ghosts' reflections and no-slip
+//! velocities, the energy budget's rates) is in the physics crate's vocabulary,
+//! `sph_stages::vocab`.
 
+use crate::components::Position;
 pub use crate::components::{BodyPose, MirrorWall, WallPose};
-use crate::components::{Density, Fluid, Ghost, Position};
-use crate::motion::Pose;
 pub use crate::piston::Piston;
-use crate::sim::{Sim, Tait};
+use crate::sim::Sim;
 use crate::stage::{SetupError, StepError};
 pub use crate::walls::Walls;
-use crate::world::{archetype, column, column_mut};
 use glam::DVec2;
 use rayon::prelude::*;
 
@@ -336,55 +324,6 @@ impl Guarded {
     }
 }
 
-/// Work dissipated by the artificial viscosity: the forces stage stores its rate here
-/// each step when a stage that reports energy has asked for it (by inserting it).
-#[derive(Debug, Default, Clone, Copy)]
-pub struct ViscousDissipation {
-    /// Rate of dissipation this step [W per metre of depth].
-    pub power: f64,
-}
-
-/// The renormalised density gradient of every particle, fluid then ghosts (the joint
-/// numbering of the neighbour lists), written each step by the momentum stage before
-/// its pair sums when its terms include delta-SPH's diffusion (docs/physics.md,
-/// "Density diffusion").
-#[derive(Debug, Default, Clone)]
-pub struct DensityGradients(pub Vec<glam::DVec2>);
-
-/// The rate at which a density-diffusion term changes the internal energy,
-/// sum_i m_i (p_i/rho_i^2) D_i, each step when a stage that reports energy has asked
-/// for it (by inserting it); filled in by the momentum stage whose terms include a
-/// density diffusion (docs/physics.md, "Density diffusion").
-#[derive(Debug, Default, Clone, Copy)]
-pub struct DiffusionPower {
-    /// Rate of internal-energy change this step [W per metre of depth].
-    pub power: f64,
-}
-
-/// The energy the safeguards outside the model add to the fluid (wall reflections, the
-/// density floor, densities restored on reflection): the integrator stores the change
-/// of kinetic + potential + internal energy its guards made this step, divided by the
-/// step, when a stage that reports energy has asked for it (by inserting it), so that
-/// energy.csv books it apart from the flow (docs/physics.md, "Energy budget").
-#[derive(Debug, Default, Clone, Copy)]
-pub struct GuardPower {
-    /// The guards' energy change this step over the step [W per metre of depth].
-    pub power: f64,
-}
-
-/// Work the walls do on the fluid through the ghost particles: the forces stage stores
-/// its rate here each step when a stage that reports energy has asked for it (by
-/// inserting it). It is the rate at which the ghost pairs change the fluid's energy
-/// E = kinetic + potential + internal + dissipated (docs/physics.md, "Energy budget"):
-/// sum_i [ m_i a_i^g . v_i + m_i (p_i/rho_i^2) (d rho_i/dt)^g + D_i^g ], with a^g,
-/// (d rho/dt)^g and D^g the acceleration, density rate and dissipation rate from the
-/// ghost neighbours alone.
-#[derive(Debug, Default, Clone, Copy)]
-pub struct WallPower {
-    /// Rate of work done on the fluid this step [W per metre of depth].
-    pub power: f64,
-}
-
 /// Monaghan's artificial viscosity coefficients a momentum stage runs with, exposed in
 /// its declared contract ([`crate::contract::Access::exposes`]): a sweep damps its
 /// linear-theory reference by the viscosity they imply
@@ -396,154 +335,3 @@ pub struct ArtificialViscosity {
     /// Quadratic coefficient beta.
     pub beta: f64,
 }
-
-/// Marks that a `Continuity()` stage writes the density rate (so `Forces` refuses to
-/// write it too).
-pub struct ContinuityInPipeline;
-
-/// How the ghost-wall stage sets ghost densities, for a later stage that refreshes
-/// them ([`refresh_ghost_density`]). What each ghost needs is on the ghost: its source
-/// (`Ghost`) and the wall it was mirrored across ([`MirrorWall`]).
-#[derive(Clone, Debug, Default)]
-pub struct GhostSettings {
-    /// The hydrostatic correction is on.
-    pub hydrostatic: bool,
-}
-
-/// Ghost density: the source's, or with the hydrostatic correction the density whose
-/// pressure is p_source + rho_0 (g - a_w) . (x_ghost - x_source), a_w the acceleration
-/// at the source of the body (tank or piston) whose wall it was mirrored across.
-#[inline]
-pub fn ghost_density(
-    rho_source: f64,
-    source: DVec2,
-    ghost: DVec2,
-    correction: Option<((Tait, DVec2), Pose)>,
-) -> f64 {
-    match correction {
-        Some(((eos, g), pose)) => {
-            let g_eff = g - pose.acceleration_at(source);
-            eos.density(eos.pressure(rho_source) + eos.rho0 * g_eff.dot(ghost - source))
-        }
-        None => rho_source,
-    }
-}
-
-/// Re-copies every ghost's density from its source (after a stage changed the fluid
-/// densities, e.g. re-initialisation), with the hydrostatic correction if enabled: the
-/// acceleration is that of the body whose wall the ghost was mirrored across, as the
-/// world holds it now (the walls have not moved since the ghosts were placed this step).
-pub fn refresh_ghost_density(sim: &Sim) -> Result<(), StepError> {
-    let (Some(fluid), Some(ghost)) = (
-        archetype::<Fluid>(&sim.world),
-        archetype::<Ghost>(&sim.world),
-    ) else {
-        return Ok(());
-    };
-    let hydrostatic = sim
-        .resources
-        .get::<GhostSettings>()
-        .is_some_and(|s| s.hydrostatic);
-    // The few walls' body poses, looked up by entity for each ghost.
-    let poses: Vec<(hecs::Entity, Pose)> = if hydrostatic {
-        sim.world
-            .query::<(hecs::Entity, &WallPose)>()
-            .iter()
-            .map(|(e, w)| (e, w.body))
-            .collect()
-    } else {
-        Vec::new()
-    };
-    let eos_g = (sim.constants.eos, sim.constants.gravity);
-    let (fx, fr) = (column::<Position>(fluid)?, column::<Density>(fluid)?);
-    let (gs, gx) = (column::<Ghost>(ghost)?, column::<Position>(ghost)?);
-    let walls = if hydrostatic {
-        Some(column::<MirrorWall>(ghost)?)
-    } else {
-        None
-    };
-    let mut gr = column_mut::<Density>(ghost)?;
-    let (fx, fr): (&[Position], &[Density]) = (&fx, &fr);
-    let walls: Option<&[MirrorWall]> = walls.as_deref();
-    (&mut gr[..], &gs[..], &gx[..])
-        .into_par_iter()
-        .enumerate()
-        .for_each(|(k, (rho, g, x))| {
-            // A wall particle's density follows from its extrapolated pressure.
-            if g.is_wall_particle() {
-                return;
-            }
-            let s = g.source as usize;
-            let body = walls.and_then(|w| {
-                let wall = w[k].0;
-                poses.iter().find(|(e, _)| *e == wall).map(|p| p.1)
-            });
-            rho.0 = ghost_density(fr[s].0, fx[s].0, x.0, body.map(|b| (eos_g, b)));
-        });
-    Ok(())
-}
-
-/// The linear part of each ghost's velocity mirror, fluid-to-ghost, one 2x2 matrix
-/// `[xx, xy, yx, yy]` per ghost in archetype order: a change dv of a source's velocity
-/// changes its ghost's by L dv (I - 2 n n^T per wall crossed: a ghost's `Velocity`
-/// mirrors the normal component whatever the walls' slip, see [`NoSlipVelocities`]).
-/// Asked for by a stage that changes fluid velocities after the ghosts were placed
-/// (the DFSPH solves, which keep the ghosts' velocities mirrored during their
-/// iterations) by inserting it; filled in by `GhostWalls` every step.
-#[derive(Debug, Default, Clone)]
-pub struct GhostReflections(pub Vec<[f64; 4]>);
-
-impl GhostReflections {
-    /// L v for ghost `k`.
-    #[inline(always)]
-    pub fn apply(&self, k: usize, v: DVec2) -> DVec2 {
-        let l = self.0[k];
-        DVec2::new(l[0] * v.x + l[1] * v.y, l[2] * v.x + l[3] * v.y)
-    }
-}
-
-/// With walls that do not slip (`GhostWalls(slip: NoSlip)`): every ghost's no-slip
-/// velocity 2 v_w - v of its source (applied across each wall it was mirrored across),
-/// in ghost archetype order, which the viscous terms read (`pair::Field::ShearVx`);
-/// the ghost's `Velocity`, which continuity and the pressure solves read, mirrors the
-/// normal component only. Reversing the tangential velocity in the continuity equation
-/// makes a flow along the wall that speeds up or slows down (du/dx != 0) look
-/// compressed or stretched at the wall; a dam break's surge then blew up (Adami, Hu &
-/// Adams 2012, sec. 2.3, use the no-slip velocity in the viscous term only).
-/// Inserted by `GhostWalls` at setup, filled every step; a stage that changes fluid
-/// velocities after the ghosts were placed changes ghost k's by `sign[k]` times its
-/// source's change (the linear part of the mirror, +-I).
-#[derive(Debug, Default, Clone)]
-pub struct NoSlipVelocities {
-    /// [m/s]
-    pub velocity: Vec<DVec2>,
-    /// (-1)^(walls crossed).
-    pub sign: Vec<f64>,
-}
-
-/// The divergence-free SPH factors of one step (Bender & Koschier 2017, eq. 11, in
-/// pressure form): for every fluid particle
-/// alpha_i = rho_i^2 / ( |sum_j m_j grad W_ij|^2 + sum_j |m_j grad W_ij|^2 ),
-/// so a pressure p_i = alpha_i (rho*_i - rho_0) / dt^2 removes particle i's predicted
-/// density error rho*_i - rho_0 when its neighbours' pressures are held fixed (the
-/// Jacobi step of both DFSPH solves); and for every ghost the pressure it adds to its
-/// source's (the hydrostatic carry rho_0 (g - a_w) . (x_ghost - x_source) with the
-/// ghost walls' `hydrostatic: true`, else 0). Written by `DfsphFactor` after the
-/// neighbour grid, read by `DivergenceSolve` and `DensitySolve`.
-#[derive(Debug, Default, Clone)]
-pub struct DfsphFactors {
-    /// alpha_i per fluid particle [m^2].
-    pub alpha: Vec<f64>,
-    /// Pressure carried to each ghost [Pa], archetype order.
-    pub ghost_offset: Vec<f64>,
-    /// `DfsphFactor(continuity_floor: true)`: the density solve leaves each fluid
-    /// particle's predicted density rho_i + dt D rho_i/Dt (final velocities) in the
-    /// `Density` column, the continuity density the next step's factor stage floors the
-    /// summation density with.
-    pub continuity_floor: bool,
-}
-
-/// The step the pressure solve chose (from the velocity CFL condition), for the stage
-/// that advances the clock by it: written by `DensitySolve`, read by `Advance`.
-#[derive(Debug, Default, Clone, Copy)]
-pub struct StepSize(pub f64);

@@ -6,7 +6,7 @@ use cohesion::{Cohesion, Params};
 use glam::DVec2;
 use sph_core::components::{Density, Fluid, Mass, Position, Pressure, Velocity};
 use sph_core::kernel::{Kernel, KernelKind, Wendland};
-use sph_core::pair::{EquationsOfMotion, Field, Isa, NoTerms, Packed, Pass, PluginTerm};
+use sph_core::pair::{EquationsOfMotion, Field, Isa, NoTerms, Pass, PluginTerm};
 use sph_core::pair::{RateTerm, Records, WithPlugins};
 use sph_core::sim::{Constants, Tait};
 use sph_core::terms::Term;
@@ -60,15 +60,10 @@ fn accelerations(world: &hecs::World, t: Cohesion, isa: Isa) -> Vec<DVec2> {
         plugins: &plugins,
     };
     let mut r = Records::default();
-    let extra = Packed {
-        gradients: None,
-        no_slip: None,
-    };
-    r.pack_with(
+    r.pack(
         &Particles::of(world).unwrap(),
         terms.reads(),
         &constants().eos,
-        extra,
     )
     .unwrap();
     let k = Wendland::new(H);

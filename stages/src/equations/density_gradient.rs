@@ -13,12 +13,15 @@
 //! the wall, and so does its gradient. `Forces` computes the gradients before its pair
 //! sums when its terms include `DeltaSph()` (one pass more over the neighbours).
 
+use crate::vocab::DensityGradient;
+use crate::vocab::GradientUnrenormalised;
 use rayon::prelude::*;
 use sph_core::components::Ghost;
-use sph_core::pair::{with_records, Field, Fields, Lane, Me, Pair, PairTerm, Pass};
+use sph_core::pair::{with_records, Columns, Field, Fields, Lane, Me, Pair, PairTerm, Pass, Scope};
+use sph_core::sim::Counter;
 use sph_core::sim::Sim;
 use sph_core::stage::StepError;
-use sph_core::vocab::{DensityGradients, Neighbours};
+use sph_core::vocab::Neighbours;
 use sph_core::with_kernel;
 use sph_core::world::{archetype, column};
 
@@ -67,23 +70,27 @@ impl PairTerm for Renormalised {
 }
 
 /// Writes the renormalised density gradient of every fluid particle and ghost into the
-/// sim's [`DensityGradients`], from the current state and neighbour lists.
+/// sim's [`DensityGradient`] column, from the current state and neighbour lists.
 pub(crate) fn compute(sim: &mut Sim) -> Result<(), StepError> {
     let _span = tracing::trace_span!("pair_sums").entered();
-    let mut out = sim.resources.take::<DensityGradients>().unwrap_or_default();
+    let mut out = sim
+        .resources
+        .get_or_default::<Columns>()
+        .remove::<DensityGradient>()
+        .unwrap_or_default();
     let singular = with_records(sim, Renormalised.reads(), |sim, _, records| {
         let Some(nb) = sim.resources.get::<Neighbours>() else {
             return Ok(0);
         };
         let n = nb.n_fluid;
-        out.0.clear();
-        out.0.resize(records.len(), glam::DVec2::ZERO);
+        out.clear();
+        out.resize(records.len(), glam::DVec2::ZERO);
         let c = &sim.constants;
         let singular = with_kernel!(c.kernel, c.h, |k| {
             let pass = Pass::new(&Renormalised, k, records)
                 .map_err(|e| StepError::Internal(e.to_string()))?;
             Ok::<usize, StepError>(
-                out.0[..n]
+                out[..n]
                     .par_iter_mut()
                     .enumerate()
                     .map(|(i, g)| {
@@ -96,7 +103,7 @@ pub(crate) fn compute(sim: &mut Sim) -> Result<(), StepError> {
         })?;
         if let Some(ghosts) = archetype::<Ghost>(&sim.world) {
             let sources = column::<Ghost>(ghosts)?;
-            let (fluid, ghost) = out.0.split_at_mut(n);
+            let (fluid, ghost) = out.split_at_mut(n);
             if ghost.len() != sources.len() {
                 return Err(StepError::Internal(format!(
                     "{} records beyond the fluid's {n} for {} ghosts",
@@ -110,11 +117,9 @@ pub(crate) fn compute(sim: &mut Sim) -> Result<(), StepError> {
         }
         Ok(singular)
     })?;
-    if let Some(singular @ 1..) = singular {
-        *sim.diagnostics
-            .entry("gradient_unrenormalised".into())
-            .or_insert(0.0) += singular as f64;
-    }
-    sim.resources.insert(out);
+    GradientUnrenormalised::add(&mut sim.diagnostics, singular.unwrap_or(0) as u64);
+    sim.resources
+        .get_or_default::<Columns>()
+        .insert::<DensityGradient>(Scope::Particles, out)?;
     Ok(())
 }

@@ -10,18 +10,17 @@ use crate::terms::{
     artificial_viscosity, plugin_terms, pressure_gradient, term_list_seed, PrePass, RateTerms,
     TermRegistry, TermSpec,
 };
+use crate::vocab::{DiffusionPower, NoSlipVelocity, ViscousDissipation, WallPower};
 use serde::de::{self, DeserializeSeed, MapAccess, Visitor};
 use serde::{Deserializer, Serialize};
 use sph_core::components::{Acceleration, DensityRate, Fluid, NeighbourCount};
 use sph_core::contract::Access;
+use sph_core::pair::Columns;
 use sph_core::pair::{PluginTerm, WithPlugins};
 use sph_core::registry::Identifier;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{
-    require_neighbours, DiffusionPower, NeighbourCountsInPass, Neighbours, NoSlipVelocities,
-    ViscousDissipation, WallPower,
-};
+use sph_core::vocab::{require_neighbours, NeighbourCountsInPass, Neighbours};
 use sph_core::world::{archetype, ensure_component};
 use sph_core::StageRegistry;
 
@@ -107,7 +106,7 @@ pub struct Forces {
     pre_passes: Vec<PrePass>,
     /// The energy rates of each chunk of particles, kept between steps.
     chunk_power: Vec<rates::Power>,
-    /// The viscous terms read the ghosts' no-slip velocities (`NoSlipVelocities`).
+    /// The viscous terms read the ghosts' no-slip velocities (`NoSlipVelocity`).
     wall_shear: bool,
     /// The fluid has a `NeighbourCount` column, which this pass fills in while the
     /// lists have a skin (`vocab::NeighbourCountsInPass`).
@@ -135,6 +134,13 @@ impl Forces {
     }
 }
 
+/// Whether the walls store the ghosts' no-slip velocities (walls that do not slip).
+fn has_no_slip(sim: &Sim) -> bool {
+    sim.resources
+        .get::<Columns>()
+        .is_some_and(|c| c.contains::<NoSlipVelocity>())
+}
+
 impl Stage for Forces {
     fn name(&self) -> &'static str {
         "forces"
@@ -142,7 +148,7 @@ impl Stage for Forces {
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         require_neighbours(sim, "forces")?;
-        let no_slip = sim.resources.contains::<NoSlipVelocities>();
+        let no_slip = has_no_slip(sim);
         self.build_terms(sim, no_slip);
         ensure_component::<Fluid, Acceleration>(sim);
         if self.terms.continuity.is_some() {
@@ -159,7 +165,7 @@ impl Stage for Forces {
         let _span = tracing::trace_span!("pair_sums").entered();
         // Ghost walls set up after this stage (a pipeline that lists them later) are
         // known only now.
-        let no_slip = sim.resources.contains::<NoSlipVelocities>();
+        let no_slip = has_no_slip(sim);
         if no_slip != self.wall_shear {
             self.build_terms(sim, no_slip);
         }
@@ -225,7 +231,7 @@ impl Stage for Forces {
             .writes::<DiffusionPower>()
             .writes::<WallPower>()
             .uses::<NeighbourCount>()
-            .uses::<NoSlipVelocities>();
+            .uses::<NoSlipVelocity>();
         terms.iter().fold(access, |a, t| t.declare(a))
     }
 }

@@ -7,6 +7,7 @@
 //! Run it every N steps with the stage's `every: N`; leave the stage out for "never".
 
 use crate::terms::{free_surface_density::FreeSurfaceDensity, mls::Mls, shepard::Shepard};
+use crate::vocab::{refresh_ghost_density, GhostSettings};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::components::{Density, Ghost, Mass, Position};
@@ -15,9 +16,7 @@ use sph_core::kernel::Kernel;
 use sph_core::pair::{with_records, PairTerm, Pass};
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{
-    refresh_ghost_density, require_neighbours, GhostSettings, HalfDensity, Neighbours,
-};
+use sph_core::vocab::{require_neighbours, HalfDensity, Neighbours};
 use sph_core::{with_kernel, StageRegistry};
 
 /// The density filter.

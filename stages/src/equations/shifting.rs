@@ -38,6 +38,7 @@
 //! packed records before any position is written, so the result does not depend on
 //! the number of threads.
 
+use crate::vocab::ShiftsCapped;
 use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -45,6 +46,7 @@ use sph_core::components::{Density, Fluid, Ghost, Mass, Position};
 use sph_core::contract::Access;
 use sph_core::kernel::Kernel;
 use sph_core::pair::{with_records, Field, Fields, Lane, Me, Pair, PairTerm, Pass};
+use sph_core::sim::Counter;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{require_neighbours, Neighbours};
@@ -322,7 +324,7 @@ impl Stage for Shifting {
                 .for_each(|(x, dr)| x.0 += *dr);
         }
         if capped > 0 {
-            *sim.diagnostics.entry("shifts_capped".into()).or_insert(0.0) += capped as f64;
+            ShiftsCapped::add(&mut sim.diagnostics, capped as u64);
         }
         Ok(())
     }
@@ -336,5 +338,6 @@ impl Stage for Shifting {
             .reads::<Mass>()
             .updates::<Position>()
             .uses::<Ghost>()
+            .writes::<ShiftsCapped>()
     }
 }

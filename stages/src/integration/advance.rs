@@ -6,13 +6,16 @@
 //! behind a wall is reflected (`Walls::reflect`, counted in `wall_reflections`), as
 //! `Integrate` does; a non-finite position or one outside the domain stops the run.
 
+use crate::vocab::StepSize;
+use crate::vocab::WallReflections;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::components::{Fluid, Position, Velocity};
 use sph_core::contract::Access;
+use sph_core::sim::Counter;
 use sph_core::sim::{Clock, Sim};
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{BodyPose, StepSize, WallPose, Walls};
+use sph_core::vocab::{BodyPose, WallPose, Walls};
 use sph_core::world::{archetype, column_mut};
 use sph_core::StageRegistry;
 
@@ -103,11 +106,7 @@ impl Stage for Advance {
                 || (0, None),
                 |(h1, b1), (h2, b2)| (h1 + h2, b1.into_iter().chain(b2).min()),
             );
-        if reflected > 0 {
-            *sim.diagnostics
-                .entry("wall_reflections".into())
-                .or_insert(0.0) += reflected as f64;
-        }
+        WallReflections::add(&mut sim.diagnostics, reflected as u64);
         let Some(i) = bad else {
             return Ok(());
         };
@@ -137,5 +136,6 @@ impl Stage for Advance {
             .writes::<WallPose>()
             .writes::<BodyPose>()
             .writes::<Position>()
+            .writes::<WallReflections>()
     }
 }

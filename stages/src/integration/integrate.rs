@@ -8,15 +8,18 @@
 //! and the integer-time values the next force evaluation uses are predicted as
 //! v^{n+1} = v^{n+1/2} + dt_n/2 a^n (likewise rho). Second order for a constant step.
 
+use crate::vocab::GuardPower;
+use crate::vocab::{DensityFloored, WallReflections};
 use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{get_column, put_column, Dec, Enc};
 use sph_core::components::{Acceleration, Density, DensityRate, Fluid, Mass, Position, Velocity};
 use sph_core::contract::Access;
+use sph_core::sim::Counter;
 use sph_core::sim::{Clock, Sim, Tait};
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{BodyPose, GuardPower, Guarded, HalfDensity, HalfVelocity, WallPose, Walls};
+use sph_core::vocab::{BodyPose, Guarded, HalfDensity, HalfVelocity, WallPose, Walls};
 use sph_core::world::{archetype, column, column_mut, ensure_component};
 use sph_core::StageRegistry;
 
@@ -304,16 +307,8 @@ impl Stage for Integrate {
         if let Some(p) = sim.resources.get_mut::<GuardPower>() {
             p.power = guard_energy as f64 / FIXED_POINT / dt;
         }
-        if reflected > 0 {
-            *sim.diagnostics
-                .entry("wall_reflections".into())
-                .or_insert(0.0) += reflected as f64;
-        }
-        if floored > 0 {
-            *sim.diagnostics
-                .entry("density_floored".into())
-                .or_insert(0.0) += floored as f64;
-        }
+        WallReflections::add(&mut sim.diagnostics, reflected as u64);
+        DensityFloored::add(&mut sim.diagnostics, floored as u64);
         match bad {
             Some(i) => Err(self.diagnose(sim, i, x[i].0, rho[i].0)),
             None => Ok(()),
@@ -340,6 +335,8 @@ impl Stage for Integrate {
             .writes::<HalfVelocity>()
             .writes::<HalfDensity>()
             .writes::<Guarded>()
+            .writes::<WallReflections>()
+            .writes::<DensityFloored>()
     }
 }
 

@@ -14,6 +14,7 @@
 //! The accumulated entries are a table ([`BUDGET`]): a new dissipation or work figure
 //! is one more row, with the resource its rate comes from.
 
+use crate::vocab::{DiffusionPower, GuardPower, ViscousDissipation, WallPower};
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc, Resuming};
 use sph_core::components::{Density, Mass, Position, Velocity};
@@ -21,7 +22,6 @@ use sph_core::contract::Access;
 use sph_core::series::SeriesWriter;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{DiffusionPower, GuardPower, ViscousDissipation, WallPower};
 use sph_core::world::{sum_fixed, Particles};
 use sph_core::StageRegistry;
 use sph_output::SeriesPlot;

@@ -28,6 +28,10 @@
 
 mod extraction;
 pub use extraction::roll_moment;
+use sph_core::sim::Counter;
+/// Reads a counter from the sim's diagnostics.
+type ReadCount = fn(&std::collections::BTreeMap<String, f64>) -> f64;
+use crate::vocab::{DensityFloored, WallReflections};
 use extraction::*;
 
 use crate::transducer::{face_offsets, BoxFilter};
@@ -169,11 +173,11 @@ pub struct Probe {
     scratch: std::cell::RefCell<Scratch>,
 }
 
-/// The cumulative guard counters of `Sim::diagnostics` (written by `Integrate`) and the
-/// probes.csv columns that give their increase over each sampling interval.
-const GUARD_COUNTS: [(&str, &str); 2] = [
-    ("density_floored", "floored"),
-    ("wall_reflections", "reflected"),
+/// The guards' counters (written by `Integrate` or `Advance`) and the probes.csv
+/// columns that give their increase over each sampling interval.
+const GUARD_COUNTS: [(ReadCount, &str); 2] = [
+    (DensityFloored::counted, "floored"),
+    (WallReflections::counted, "reflected"),
 ];
 
 impl Stage for Probe {
@@ -314,8 +318,8 @@ impl Stage for Probe {
             // The guards' actions since the previous sample, after the guard columns
             // `sample` wrote (the counters only grow).
             let at = self.columns().iter().position(|c| c == "floored");
-            for (k, (diagnostic, _)) in GUARD_COUNTS.iter().enumerate() {
-                let now = sim.diagnostics.get(*diagnostic).copied().unwrap_or(0.0);
+            for (k, (counted, _)) in GUARD_COUNTS.iter().enumerate() {
+                let now = counted(&sim.diagnostics);
                 if let Some(cell) = at.and_then(|at| row.get_mut(at + k)) {
                     *cell = now - self.guard_counts[k];
                 }
@@ -454,7 +458,9 @@ impl Stage for Probe {
             .reads_if::<NeighbourCount>(self.params.neighbours)
             .reads_if::<Acceleration>(self.params.roll_moment)
             .uses::<Guarded>()
-            .uses::<Ghost>();
+            .uses::<Ghost>()
+            .uses::<DensityFloored>()
+            .uses::<WallReflections>();
         // The gauges (read from the world at setup) need the grid too; setup checks.
         if !self.params.piston {
             access.uses::<Neighbours>()

@@ -17,6 +17,7 @@
 //! The error is the mean compression over the fluid, max(rho*_i - rho_0, 0) / rho_0.
 
 use crate::pressure_solve::{cap_relaxation, limits, Jacobi, Limits, Report, Target};
+use crate::vocab::{DfsphFactors, GhostReflections, NoSlipVelocity, StepSize};
 use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -27,9 +28,7 @@ use sph_core::components::{
 use sph_core::contract::Access;
 use sph_core::sim::{Clock, Sim};
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{
-    require_neighbours, DfsphFactors, GhostReflections, Neighbours, NoSlipVelocities, StepSize,
-};
+use sph_core::vocab::{require_neighbours, Neighbours};
 use sph_core::world::{archetype, column, column_mut};
 use sph_core::StageRegistry;
 
@@ -192,10 +191,10 @@ impl Stage for DensitySolve {
                     .for_each(|(k, v)| v.0 += dt * mirror.apply(k, a[source[k].source as usize].0));
             }
         }
-        if let Some(ns) = sim.resources.get_mut::<NoSlipVelocities>() {
+        {
             let a = column::<Acceleration>(fluid)?;
             let a: &[Acceleration] = &a;
-            crate::pressure_solve::shift_no_slip(&sim.world, ns, |s| dt * a[s].0)?;
+            crate::pressure_solve::shift_no_slip(&sim.world, &mut sim.resources, |s| dt * a[s].0)?;
         }
         let solved = self
             .jacobi
@@ -232,7 +231,7 @@ impl Stage for DensitySolve {
             .reads::<Neighbours>()
             .reads::<DfsphFactors>()
             .reads::<GhostReflections>()
-            .uses::<NoSlipVelocities>()
+            .uses::<NoSlipVelocity>()
             .reads::<Position>()
             .reads::<Mass>()
             .updates::<Density>()

@@ -10,6 +10,7 @@
 
 use crate::pressure_solve::each;
 use crate::terms::dfsph_factor::DensityFactor;
+use crate::vocab::{DfsphFactors, GhostSettings};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure};
@@ -19,7 +20,7 @@ use sph_core::motion::Pose;
 use sph_core::pair::{Field, Fields};
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{require_neighbours, DfsphFactors, GhostSettings, MirrorWall, WallPose};
+use sph_core::vocab::{require_neighbours, MirrorWall, WallPose};
 use sph_core::world::{archetype, column, column_mut};
 use sph_core::{with_kernel, StageRegistry};
 

@@ -9,14 +9,13 @@
 //! keeps the initial velocities.
 
 use crate::pressure_solve::{cap_relaxation, limits, Jacobi, Limits, Report, Target};
+use crate::vocab::{DfsphFactors, GhostReflections, NoSlipVelocity};
 use serde::{Deserialize, Serialize};
 use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure, Velocity};
 use sph_core::contract::Access;
 use sph_core::sim::{Clock, Sim};
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{
-    require_neighbours, DfsphFactors, GhostReflections, Neighbours, NoSlipVelocities,
-};
+use sph_core::vocab::{require_neighbours, Neighbours};
 use sph_core::world::{archetype, column_mut};
 use sph_core::StageRegistry;
 
@@ -133,7 +132,7 @@ impl Stage for DivergenceSolve {
             .reads::<Neighbours>()
             .reads::<DfsphFactors>()
             .reads::<GhostReflections>()
-            .uses::<NoSlipVelocities>()
+            .uses::<NoSlipVelocity>()
             .reads::<Position>()
             .reads::<Mass>()
             .reads::<Density>()

@@ -52,17 +52,20 @@
 //! Deterministic for any thread count: every particle's sums are gathers over its own
 //! neighbour list, and the error is summed in fixed chunks (`world::sum_fixed`).
 
+use crate::vocab::{DfsphFactors, GhostReflections, NoSlipSigns, NoSlipVelocity};
 use glam::DVec2;
 use rayon::prelude::*;
 use sph_core::components::{Density, Fluid, Ghost, Pressure, Velocity};
 use sph_core::kernel::Kernel;
+use sph_core::pair::Columns;
 use sph_core::pair::{
     with_records, with_records_packed, EquationsOfMotion, Field, Fields, Packing, PairTerm, Pass,
     RateSums,
 };
+use sph_core::sim::Resources;
 use sph_core::sim::Sim;
 use sph_core::stage::StepError;
-use sph_core::vocab::{DfsphFactors, GhostReflections, Neighbours, NoSlipVelocities};
+use sph_core::vocab::Neighbours;
 use sph_core::with_kernel;
 use sph_core::world::{archetype, column, column_mut, sum_fixed};
 
@@ -116,7 +119,7 @@ pub(crate) struct Jacobi {
 impl Jacobi {
     /// [`Jacobi::solve`] with the step's `DfsphFactors`: the factors, and the ghosts'
     /// pressure carries if `carry` (else none); the ghosts' no-slip velocities
-    /// (`NoSlipVelocities`, walls that do not slip) then follow their sources' change.
+    /// (`NoSlipVelocity`, walls that do not slip) then follow their sources' change.
     pub(crate) fn solve_with_factors(
         &mut self,
         sim: &mut Sim,
@@ -137,8 +140,8 @@ impl Jacobi {
         // The ghosts' no-slip velocities follow their sources' change too.
         // (`acc` is empty when the solve found no fluid.)
         let acc = &self.acc;
-        if let (false, Some(ns)) = (acc.is_empty(), sim.resources.get_mut::<NoSlipVelocities>()) {
-            shift_no_slip(&sim.world, ns, |s| dt * acc[s])?;
+        if !acc.is_empty() {
+            shift_no_slip(&sim.world, &mut sim.resources, |s| dt * acc[s])?;
         }
         Ok(outcome)
     }
@@ -317,31 +320,41 @@ fn residual(target: Target, dt: f64, rho0: f64, rho: f64, rate: f64) -> f64 {
     }
 }
 
-/// Changes every ghost's no-slip velocity `ns` by the mirror of its source's velocity
-/// change `dv(source)`; the ghosts are `world`'s.
+/// Changes every ghost's no-slip velocity (the [`NoSlipVelocity`] column, when the
+/// walls do not slip) by the mirror of its source's velocity change `dv(source)`; the
+/// ghosts are `world`'s.
 pub(crate) fn shift_no_slip(
     world: &hecs::World,
-    ns: &mut NoSlipVelocities,
+    resources: &mut Resources,
     dv: impl Fn(usize) -> DVec2 + Sync,
 ) -> Result<(), StepError> {
     let Some(ghost) = archetype::<Ghost>(world) else {
         return Ok(());
     };
+    let Some(signs) = resources.take::<NoSlipSigns>() else {
+        return Ok(());
+    };
     let source = column::<Ghost>(ghost)?;
     let source: &[Ghost] = &source;
-    if ns.velocity.len() != source.len() || ns.sign.len() != source.len() {
-        return Err(StepError::Internal(format!(
+    let shifted = match resources
+        .get_mut::<Columns>()
+        .and_then(|c| c.get_mut::<NoSlipVelocity>())
+    {
+        Some(ns) if ns.len() == source.len() && signs.0.len() == source.len() => {
+            let sign = &signs.0;
+            ns.par_iter_mut()
+                .enumerate()
+                .for_each(|(k, v)| *v += sign[k] * dv(source[k].source as usize));
+            Ok(())
+        }
+        ns => Err(StepError::Internal(format!(
             "{} ghosts but {} no-slip velocities: GhostWalls must run before the solves",
             source.len(),
-            ns.velocity.len()
-        )));
-    }
-    let sign = &ns.sign;
-    ns.velocity
-        .par_iter_mut()
-        .enumerate()
-        .for_each(|(k, v)| *v += sign[k] * dv(source[k].source as usize));
-    Ok(())
+            ns.map_or(0, |ns| ns.len())
+        ))),
+    };
+    resources.insert(signs);
+    shifted
 }
 
 /// Sets every ghost's pressure to its source's plus its carry, at least 0.

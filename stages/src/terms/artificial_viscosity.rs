@@ -7,6 +7,7 @@
 //! (1/2) sum_i m_i sum_j m_j Pi_ij v_ij . grad_i W_ij of kinetic energy per second.
 
 use super::{check_non_negative, Term};
+use crate::vocab::viscous_v_ij;
 use serde::{Deserialize, Serialize};
 use sph_core::contract::Access;
 use sph_core::pair::{Field, Fields, Lane, Me, Pair, RateTerm, Rates};
@@ -83,7 +84,7 @@ impl RateTerm for ArtificialViscosity {
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
         let c = L::splat;
-        let (wx, wy) = p.viscous_v_ij(me, self.shear);
+        let (wx, wy) = viscous_v_ij(p, me, self.shear);
         let vx = wx * p.dx + wy * p.dy;
         let d = p.r * p.r + c(self.eta2);
         let cbar = c(0.5) * (me.lanes::<L>(Field::Sound) + p.j(Field::Sound));

@@ -8,10 +8,11 @@
 
 use super::diffusion::{Params, Scale};
 use super::Term;
+use crate::vocab::DensityGradient;
+use crate::vocab::GradientUnrenormalised;
 use sph_core::contract::Access;
 use sph_core::pair::{Field, Fields, Lane, Me, Pair, RateTerm, Rates};
 use sph_core::sim::Constants;
-use sph_core::vocab::DensityGradients;
 
 /// `DeltaSph(delta: 0.1)`.
 #[derive(Clone, Copy, Debug, Default)]
@@ -20,7 +21,7 @@ pub struct DeltaSph {
 }
 
 impl Term for DeltaSph {
-    const READS: Fields = Fields::of(&[Field::Rho, Field::PRho2, Field::GradRhoX, Field::GradRhoY]);
+    const READS: Fields = Fields::of(&[Field::Rho, Field::PRho2]).with(DensityGradient::FIELDS);
     const DIFFUSION: bool = true;
     type Params = Params;
     fn check(p: &Params) -> Result<(), sph_core::ParamError> {
@@ -33,7 +34,9 @@ impl Term for DeltaSph {
     }
     const PRE_PASS: Option<super::PrePass> = Some(crate::density_gradient::compute);
     fn declare(_: &Params, access: Access) -> Access {
-        access.writes::<DensityGradients>()
+        access
+            .writes::<DensityGradient>()
+            .writes::<GradientUnrenormalised>()
     }
 }
 
@@ -46,8 +49,8 @@ impl RateTerm for DeltaSph {
         // (rho_j - rho_i) - (1/2)(G_i + G_j) . x_ji, with x_ji = -(dx, dy): the flux of
         // 2 d x_ji / r^2 . grad W is then psi_ij . grad W.
         let half = L::splat(0.5);
-        let gx = me.lanes::<L>(Field::GradRhoX) + p.j(Field::GradRhoX);
-        let gy = me.lanes::<L>(Field::GradRhoY) + p.j(Field::GradRhoY);
+        let gx = me.lanes::<L>(DensityGradient::X) + p.j(DensityGradient::X);
+        let gy = me.lanes::<L>(DensityGradient::Y) + p.j(DensityGradient::Y);
         let d = p.j(Field::Rho) - me.lanes::<L>(Field::Rho) + half * (gx * p.dx + gy * p.dy);
         r.diffusion = r.diffusion + self.scale.flux(p, d);
     }

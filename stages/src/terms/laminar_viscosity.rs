@@ -8,6 +8,7 @@
 //! of kinetic energy per second, which this term reports as dissipation.
 
 use super::Term;
+use crate::vocab::viscous_v_ij;
 use serde::{Deserialize, Serialize};
 use sph_core::pair::{Field, Fields, Lane, Me, Pair, RateTerm, Rates};
 use sph_core::sim::Constants;
@@ -60,7 +61,7 @@ impl RateTerm for LaminarViscosity {
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
         let c = L::splat;
-        let (wx, wy) = p.viscous_v_ij(me, self.shear);
+        let (wx, wy) = viscous_v_ij(p, me, self.shear);
         let x_grad = p.dx * p.gx + p.dy * p.gy;
         let rho_ij = me.lanes::<L>(Field::Rho) * p.j(Field::Rho);
         let k = c(self.mu_sum) * x_grad / (rho_ij * (p.r * p.r + c(self.eta2)));

@@ -27,6 +27,7 @@ pub mod riemann_diffusion;
 pub mod riemann_pressure;
 pub mod shepard;
 
+use crate::vocab::NoSlipVelocity;
 use serde::de::{self, DeserializeSeed, EnumAccess, VariantAccess, Visitor};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use sph_core::contract::Access;
@@ -39,7 +40,7 @@ pub use sph_core::terms::{PrePass, Term, TermParams, TermRegistry};
 /// them ([`Term::wall_shear`]).
 pub(crate) fn with_wall_shear(base: Fields, shear: bool) -> Fields {
     match shear {
-        true => base.with(Fields::SHEAR),
+        true => base.with(NoSlipVelocity::FIELDS),
         false => base,
     }
 }

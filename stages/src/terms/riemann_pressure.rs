@@ -13,12 +13,13 @@
 //! rhobar beta U / (rho_i rho_j) takes m_j (that) v_ij . grad_i W_ij of kinetic energy
 //! per second from a pair, booked as viscous dissipation. The dissipation is the
 //! scheme's viscosity: against a wall it reads the wall's viscous velocity
-//! ([`Term::wall_shear`]: the ghosts' `ShearVx`, `ShearVy`), so a free-slip wall of
+//! ([`Term::wall_shear`]: the ghosts' `NoSlipVelocity` column), so a free-slip wall of
 //! fixed particles does not brake the fluid sliding along it; the pressures
 //! p_i + p_j do not depend on it.
 
 use super::riemann::states;
 use super::Term;
+use crate::vocab::viscous_v_ij;
 use serde::{Deserialize, Serialize};
 use sph_core::pair::{Field, Fields, Lane, Me, Pair, RateTerm, Rates};
 use sph_core::sim::Constants;
@@ -83,7 +84,7 @@ impl RateTerm for RiemannPressure {
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
         let c = L::splat;
         let s = states(me, p);
-        let (wx, wy) = p.viscous_v_ij(me, self.shear);
+        let (wx, wy) = viscous_v_ij(p, me, self.shear);
         // U_ij = v_ij . x_ji / r: positive when the pair approaches.
         let u = (L::zero() - (wx * p.dx + wy * p.dy)) / p.r.max(c(self.tiny));
         // min(eta max(U, 0), cbar) as -max(-eta max(U, 0), -cbar): lanes have no min.

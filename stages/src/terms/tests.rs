@@ -6,11 +6,12 @@ use super::diffusion::Params;
 use super::fourtakas::Fourtakas;
 use super::molteni_colagrossi::MolteniColagrossi;
 use super::{RateTerms, Term, TermListError, TermSpec};
+use crate::vocab::{DensityGradient, NoSlipVelocity};
 use glam::DVec2;
 use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure, Velocity};
 use sph_core::kernel::{Kernel, KernelKind, Wendland};
 use sph_core::pair::PairTerm;
-use sph_core::pair::{EquationsOfMotion, Field, Isa, Packed, Pass, RateTerm, Records};
+use sph_core::pair::{Columns, EquationsOfMotion, Field, Isa, Pass, RateTerm, Records, Scope};
 use sph_core::sim::{Constants, Tait};
 use sph_core::world::Particles;
 
@@ -66,15 +67,17 @@ fn still_water() -> (hecs::World, usize) {
 
 fn packed(world: &hecs::World, fields: sph_core::pair::Fields) -> Records {
     let mut r = Records::default();
-    let grads = fields.contains(Field::GradRhoX).then(|| gradients(world));
+    let mut columns = Columns::default();
+    if fields.contains(DensityGradient::X) {
+        columns
+            .insert::<DensityGradient>(Scope::Particles, gradients(world))
+            .unwrap();
+    }
     r.pack_with(
         &Particles::of(world).unwrap(),
         fields,
         &constants().eos,
-        Packed {
-            gradients: grads.as_deref(),
-            no_slip: None,
-        },
+        &columns,
     )
     .unwrap();
     r
@@ -329,7 +332,7 @@ fn delta_sph_vanishes_on_a_linear_field_also_at_the_surface() {
 }
 
 /// With walls that do not slip, the viscous terms read each ghost's no-slip velocity
-/// (`ShearVx`, `ShearVy`) and continuity its `Velocity`: on every instruction set the
+/// (the `NoSlipVelocity` column) and continuity its `Velocity`: on every instruction set the
 /// sums equal, to round-off, the plain terms' on the same lattice with the ghosts'
 /// velocities replaced by the no-slip ones (the viscous part), and on the lattice as
 /// it is (the density rate).
@@ -362,16 +365,19 @@ fn viscous_terms_read_the_ghosts_no_slip_velocities_and_continuity_does_not() {
         let specs: Vec<TermSpec> = sph_core::registry::ron_options().from_str(text).unwrap();
         let shear = RateTerms::build(&specs, &constants(), true);
         let plain = RateTerms::build(&specs, &constants(), false);
-        assert!(shear.reads().contains(Field::ShearVx) && !plain.reads().contains(Field::ShearVx));
+        assert!(
+            shear.reads().contains(NoSlipVelocity::X) && !plain.reads().contains(NoSlipVelocity::X)
+        );
         let mut r = Records::default();
+        let mut columns = Columns::default();
+        columns
+            .insert::<NoSlipVelocity>(NoSlipVelocity::SCOPE, no_slip.clone())
+            .unwrap();
         r.pack_with(
             &Particles::of(&world).unwrap(),
             shear.reads(),
             &constants().eos,
-            Packed {
-                gradients: None,
-                no_slip: Some(&no_slip),
-            },
+            &columns,
         )
         .unwrap();
         let (on_swapped, on_world) = (

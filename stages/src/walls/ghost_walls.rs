@@ -22,22 +22,21 @@
 //! time, and velocities are mirrored relative to the wall's own velocity v_w at the
 //! foot of the particle on the wall: a ghost's `Velocity` reverses the normal
 //! component of v - v_w (no flow through the wall) whatever the slip, and with
-//! `slip: NoSlip` the viscous terms read 2 v_w - v instead (`vocab::NoSlipVelocities`;
+//! `slip: NoSlip` the viscous terms read 2 v_w - v instead (`vocab::NoSlipVelocity`;
 //! Adami, Hu & Adams 2012, sec. 2.3). The hydrostatic correction uses the effective
 //! gravity g - a_w of the tank frame, a_w the tank's rigid acceleration at the source.
 
+use crate::vocab::{ghost_density, GhostReflections, GhostSettings, NoSlipSigns, NoSlipVelocity};
 use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure, Velocity};
 use sph_core::contract::Access;
+use sph_core::pair::Columns;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{
-    ghost_density, GhostReflections, GhostSettings, ListPlan, MirrorWall, Neighbours,
-    NoSlipVelocities, WallPose, Walls,
-};
+use sph_core::vocab::{ListPlan, MirrorWall, Neighbours, WallPose, Walls};
 use sph_core::walls::WallLine;
 use sph_core::world::{archetype, column, column_mut, count};
 use sph_core::StageRegistry;
@@ -135,7 +134,11 @@ impl Stage for GhostWalls {
             hydrostatic: self.params.hydrostatic,
         });
         if self.params.slip == Slip::NoSlip {
-            sim.resources.insert(NoSlipVelocities::default());
+            sim.resources.insert(NoSlipSigns::default());
+            sim.resources
+                .get_or_default::<Columns>()
+                .insert::<NoSlipVelocity>(NoSlipVelocity::SCOPE, Vec::new())
+                .map_err(|e| SetupError::new("ghost_walls", e.to_string()))?;
         }
         Ok(())
     }
@@ -241,7 +244,8 @@ impl Stage for GhostWalls {
             .writes::<MirrorWall>()
             .writes::<GhostSettings>()
             .writes::<GhostReflections>()
-            .writes::<NoSlipVelocities>()
+            .writes::<NoSlipVelocity>()
+            .writes::<NoSlipSigns>()
     }
 }
 
@@ -278,19 +282,24 @@ impl GhostWalls {
             r.0.extend(images.iter().map(|img| reflection(lines, img)));
         }
         // The no-slip velocities (written below), one per ghost.
-        let mut no_slip = sim.resources.take::<NoSlipVelocities>();
-        if let Some(ns) = &mut no_slip {
-            ns.velocity.resize(images.len(), DVec2::ZERO);
-            ns.sign.clear();
-            ns.sign.extend(
+        if let Some(signs) = sim.resources.get_mut::<NoSlipSigns>() {
+            signs.0.clear();
+            signs.0.extend(
                 images
                     .iter()
                     .map(|img| if img.second.is_some() { 1.0 } else { -1.0 }),
             );
         }
-        let result = self.mirror_into(sim, renew, no_slip.as_mut().map(|n| &mut n.velocity[..]));
+        let columns = sim.resources.get_mut::<Columns>();
+        let mut no_slip = columns.and_then(|c| c.remove::<NoSlipVelocity>());
+        if let Some(ns) = &mut no_slip {
+            ns.resize(images.len(), DVec2::ZERO);
+        }
+        let result = self.mirror_into(sim, renew, no_slip.as_deref_mut());
         if let Some(ns) = no_slip {
-            sim.resources.insert(ns);
+            sim.resources
+                .get_or_default::<Columns>()
+                .insert::<NoSlipVelocity>(NoSlipVelocity::SCOPE, ns)?;
         }
         result
     }

@@ -19,7 +19,7 @@
 //! The wall particles move with their wall (`WallParticles`): continuity and the
 //! pressures read the wall's own velocity v_b, as Adami et al. prescribe (sec. 2.3),
 //! so no fluid enters the wall. The viscous terms (and Riemann-solver SPH's
-//! dissipation) read a second velocity (`vocab::NoSlipVelocities`), from the fluid's
+//! dissipation) read a second velocity (`vocab::NoSlipVelocity`), from the fluid's
 //! velocity smoothed the same way, u_f = sum_f v_f W_wf / sum_f W_wf (their eq. 22):
 //! with `slip: FreeSlip` v_b plus the tangential part of u_f - v_b (no shear: the
 //! fluid slides along the wall undisturbed), with `slip: NoSlip` 2 v_b - u_f (their
@@ -33,14 +33,16 @@
 //! the same for any thread count; only the few fluid particles with a wall particle in
 //! their lists contribute.
 
+use crate::vocab::{NoSlipSigns, NoSlipVelocity};
 use glam::DVec2;
 use serde::{Deserialize, Serialize};
 use sph_core::components::{Density, Fluid, Ghost, MirrorWall, Position, Pressure, Velocity};
 use sph_core::contract::Access;
 use sph_core::kernel::Kernel;
+use sph_core::pair::Columns;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{require_neighbours, Neighbours, NoSlipVelocities, WallPose};
+use sph_core::vocab::{require_neighbours, Neighbours, WallPose};
 use sph_core::world::{archetype, column, column_mut};
 use sph_core::{with_kernel, StageRegistry};
 
@@ -120,7 +122,11 @@ impl Stage for WallPressure {
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         require_neighbours(sim, "wall_pressure")?;
-        sim.resources.insert(NoSlipVelocities::default());
+        sim.resources.insert(NoSlipSigns::default());
+        sim.resources
+            .get_or_default::<Columns>()
+            .insert::<NoSlipVelocity>(NoSlipVelocity::SCOPE, Vec::new())
+            .map_err(|e| SetupError::new("wall_pressure", e.to_string()))?;
         Ok(())
     }
 
@@ -217,13 +223,15 @@ impl Stage for WallPressure {
         let mut gp = column_mut::<Pressure>(ghost)?;
         let mut gr = column_mut::<Density>(ghost)?;
         let mut gv = column_mut::<Velocity>(ghost)?;
-        let mut viscous = sim.resources.take::<NoSlipVelocities>().unwrap_or_default();
-        viscous.velocity.clear();
-        viscous.velocity.extend(gv.iter().map(|v| v.0));
+        let columns = sim.resources.get_or_default::<Columns>();
+        let mut viscous = columns.remove::<NoSlipVelocity>().unwrap_or_default();
+        viscous.clear();
+        viscous.extend(gv.iter().map(|v| v.0));
         // No stage changes fluid velocities between here and the forces (the DFSPH
         // solves, which would, refuse wall particles).
-        viscous.sign.clear();
-        viscous.sign.resize(gv.len(), 0.0);
+        let signs = sim.resources.get_or_default::<NoSlipSigns>();
+        signs.0.clear();
+        signs.0.resize(gv.len(), 0.0);
         for (k, s) in self.sums.iter().enumerate() {
             if !gs[k].is_wall_particle() {
                 continue;
@@ -236,7 +244,7 @@ impl Stage for WallPressure {
                     false => (s.pw + (gravity - wall.body.acceleration_at(x)).dot(s.rho_r)) / s.w,
                 };
                 let (v_b, u) = (wall.body.velocity_at(x), s.vw / s.w);
-                viscous.velocity[k] = match self.slip {
+                viscous[k] = match self.slip {
                     Slip::FreeSlip => v_b + (u - v_b).dot(wall.tangent()) * wall.tangent(),
                     Slip::NoSlip => 2.0 * v_b - u,
                     Slip::WallVelocity => v_b,
@@ -250,7 +258,9 @@ impl Stage for WallPressure {
             }
             gr[k].0 = eos.density(gp[k].0);
         }
-        sim.resources.insert(viscous);
+        sim.resources
+            .get_or_default::<Columns>()
+            .insert::<NoSlipVelocity>(NoSlipVelocity::SCOPE, viscous)?;
         Ok(())
     }
 
@@ -266,6 +276,7 @@ impl Stage for WallPressure {
             .reads::<Velocity>()
             .reads::<WallPose>()
             .updates::<Ghost>()
-            .writes::<NoSlipVelocities>()
+            .writes::<NoSlipVelocity>()
+            .writes::<NoSlipSigns>()
     }
 }

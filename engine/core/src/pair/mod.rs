@@ -32,6 +32,7 @@ macro_rules! each_field {
     }};
 }
 
+mod columns;
 pub mod lane;
 mod plugin;
 pub mod rates;
@@ -39,10 +40,11 @@ mod record;
 #[cfg(target_arch = "x86_64")]
 mod x86;
 
+pub use columns::{ColumnError, ColumnKey, Columns, Scope};
 pub use lane::{whole_pow, Lane};
 pub use plugin::{NoTerms, PluginTerm, WithPlugins};
 pub use rates::{EquationsOfMotion, RateSums, RateTerm, Rates};
-pub use record::{Field, Fields, Packed, Records};
+pub use record::{Field, Fields, Records};
 
 use crate::kernel::Kernel;
 
@@ -173,20 +175,6 @@ impl<L: Lane> Pair<L> {
             me.lanes::<L>(Field::Vy) - self.j(Field::Vy),
         )
     }
-
-    /// v_ij as a viscous term sees it: with `wall_shear`, j's `ShearVx`/`ShearVy` (a
-    /// ghost's no-slip mirror with walls that do not slip) against i's own velocity
-    /// (the term must then read them too), else [`Pair::v_ij`].
-    #[inline(always)]
-    pub fn viscous_v_ij(&self, me: &Me, wall_shear: bool) -> (L, L) {
-        match wall_shear {
-            true => (
-                me.lanes::<L>(Field::Vx) - self.j(Field::ShearVx),
-                me.lanes::<L>(Field::Vy) - self.j(Field::ShearVy),
-            ),
-            false => self.v_ij(me),
-        }
-    }
 }
 
 /// A sum over a particle's neighbours, written once over the lane type.
@@ -308,9 +296,10 @@ impl<'a, T: PairTerm, K: Kernel> Pass<'a, T, K> {
     pub fn sum(&self, i: usize, neighbours: &[u32]) -> T::Out {
         /// The shipped momentum pass's fields.
         const ALL: u16 = Fields::of(&Field::MOMENTUM).bits();
-        /// The same with the density gradient (delta-SPH).
+        /// The same with a vector column in slots 0 and 1 (the momentum pass with
+        /// delta-SPH's density gradient).
         const GRAD: u16 = Fields::of(&Field::MOMENTUM)
-            .with(Fields::of(&[Field::GradRhoX, Field::GradRhoY]))
+            .with(Fields::of(&[Field::Slot0, Field::Slot1]))
             .bits();
         /// The Shepard and MLS filters' (x, y, rho, m).
         const FILTER: u16 = Fields::GEOMETRY.with(Fields::of(&[Field::Rho])).bits();
@@ -468,20 +457,12 @@ pub fn with_records_packed<R>(
     f: impl FnOnce(&crate::Sim, &crate::world::Particles, &Records) -> Result<R, crate::StepError>,
 ) -> Result<Option<R>, crate::StepError> {
     let mut records = sim.resources.take::<Records>().unwrap_or_default();
-    let extra = Packed {
-        gradients: sim
-            .resources
-            .get::<crate::vocab::DensityGradients>()
-            .map(|g| &g.0[..]),
-        no_slip: sim
-            .resources
-            .get::<crate::vocab::NoSlipVelocities>()
-            .map(|n| &n.velocity[..]),
-    };
+    let empty = Columns::default();
+    let columns = sim.resources.get::<Columns>().unwrap_or(&empty);
     let eos = &sim.constants.eos;
     let result = match crate::world::Particles::of(&sim.world) {
         Some(particles) => match packing {
-            Packing::Full(fields) => records.pack_with(&particles, fields, eos, extra),
+            Packing::Full(fields) => records.pack_with(&particles, fields, eos, columns),
             Packing::Refresh(changed) => records.refresh(&particles, changed, eos),
         }
         .and_then(|()| f(sim, &particles, &records))

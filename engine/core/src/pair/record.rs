@@ -9,6 +9,7 @@
 //! again at the start of its run, because the state changes between stages (the
 //! filter changes densities, `Eos` pressures).
 
+use super::columns::Columns;
 use crate::components::{Density, Mass, Position, Pressure, Velocity};
 use crate::sim::Tait;
 use crate::stage::StepError;
@@ -36,23 +37,22 @@ pub enum Field {
     PRho2,
     /// Sound speed c(rho) of the equation of state [m/s].
     Sound,
-    /// The renormalised density gradient, x [kg/m^4] (from
-    /// [`crate::vocab::DensityGradients`]).
-    GradRhoX,
-    /// The same, y.
-    GradRhoY,
-    /// Velocity as the viscous terms see it, x [m/s]: a fluid particle's own; a ghost's
-    /// no-slip mirror with walls that do not slip ([`crate::vocab::NoSlipVelocities`]),
-    /// else its `Vx`. The kinematic terms (continuity, the pressure solves) read `Vx`,
-    /// whose ghosts always mirror the normal component only: a ghost whose tangential
-    /// velocity is reversed there adds a spurious divergence at the wall (Adami, Hu &
-    /// Adams 2012, sec. 2.3, use the no-slip velocity in the viscous term only).
-    ShearVx,
-    /// The same, y.
-    ShearVy,
+    /// Keyed column slot 0: a quantity a stage computes, packed as its key says
+    /// ([`super::ColumnKey`]; delta-SPH's density gradient takes slots 0 and 1).
+    Slot0,
+    /// Keyed column slot 1.
+    Slot1,
+    /// Keyed column slot 2 (the ghosts' no-slip velocity takes slots 2 and 3).
+    Slot2,
+    /// Keyed column slot 3.
+    Slot3,
 }
 
 impl Field {
+    /// Whether the field is a keyed column's slot (not a component of the world).
+    pub const fn is_slot(self) -> bool {
+        self as u8 >= Field::Slot0 as u8
+    }
     /// How many fields there are.
     pub const COUNT: usize = 12;
     /// Every field, in record order.
@@ -65,11 +65,13 @@ impl Field {
         Field::Mass,
         Field::PRho2,
         Field::Sound,
-        Field::GradRhoX,
-        Field::GradRhoY,
-        Field::ShearVx,
-        Field::ShearVy,
+        Field::Slot0,
+        Field::Slot1,
+        Field::Slot2,
+        Field::Slot3,
     ];
+    /// The keyed columns' slots.
+    pub const SLOTS: [Field; 4] = [Field::Slot0, Field::Slot1, Field::Slot2, Field::Slot3];
     /// What the momentum equation's terms read: one 64-byte record.
     pub const MOMENTUM: [Field; 8] = [
         Field::X,
@@ -91,8 +93,6 @@ impl Fields {
     /// What every pass packs: the geometry and the mass (the padding lanes of a group
     /// are a particle of zero mass).
     pub const GEOMETRY: Fields = Fields::of(&[Field::X, Field::Y, Field::Mass]);
-    /// The viscous terms' velocities with walls that do not slip.
-    pub const SHEAR: Fields = Fields::of(&[Field::ShearVx, Field::ShearVy]);
 
     /// The set of `list`.
     pub const fn of(list: &[Field]) -> Fields {
@@ -257,23 +257,22 @@ impl Records {
         fields: Fields,
         eos: &Tait,
     ) -> Result<(), StepError> {
-        self.pack_with(particles, fields, eos, Packed::default())
+        self.pack_with(particles, fields, eos, &Columns::default())
     }
 
-    /// [`Records::pack`], with the per-particle quantities that are not columns of
-    /// the world (see [`Packed`]).
+    /// [`Records::pack`], with the keyed columns' slots filled from `columns`.
     ///
     /// # Errors
-    /// As [`Records::pack`]; the gradients are wanted but missing or not one per
-    /// particle; the no-slip velocities are not one per ghost.
+    /// As [`Records::pack`]; a slot is wanted that no column of `columns` holds, or a
+    /// column's values are not one per particle (or ghost) of the world.
     pub fn pack_with(
         &mut self,
         particles: &Particles,
         fields: Fields,
         eos: &Tait,
-        extra: Packed,
+        columns: &Columns,
     ) -> Result<(), StepError> {
-        self.write(particles, fields, eos, extra, true)
+        self.write(particles, fields, eos, columns, true)
     }
 
     /// Packs `changed` again into records that hold it, leaving the other fields as
@@ -284,14 +283,15 @@ impl Records {
     ///
     /// # Errors
     /// The records lack a field of `changed`, or were packed for another number of
-    /// particles; a column `changed` needs is missing.
+    /// particles; a column `changed` needs is missing (a keyed column's slot cannot
+    /// be refreshed).
     pub fn refresh(
         &mut self,
         particles: &Particles,
         changed: Fields,
         eos: &Tait,
     ) -> Result<(), StepError> {
-        self.write(particles, changed, eos, Packed::default(), false)
+        self.write(particles, changed, eos, &Columns::default(), false)
     }
 
     /// Writes `fields` of every particle: into a fresh layout for them (`reshape`), or
@@ -301,19 +301,22 @@ impl Records {
         particles: &Particles,
         fields: Fields,
         eos: &Tait,
-        extra: Packed,
+        columns: &Columns,
         reshape: bool,
     ) -> Result<(), StepError> {
-        let gradients = extra.gradients;
         let (x, rho, m) = (
             particles.joined::<Position>()?,
             particles.joined::<Density>()?,
             particles.joined::<Mass>()?,
         );
         let (x, rho, m) = (x.view(), rho.view(), m.view());
-        let wants = |f: &[Field]| f.iter().any(|&f| fields.contains(f));
-        // Velocities: a field of their own, and the viscous terms' for the fluid.
-        let v = match wants(&[Field::Vx, Field::Vy, Field::ShearVx, Field::ShearVy]) {
+        let len = x.len();
+        let n_fluid = x.fluid.len();
+        let slots = columns.sources(fields, len, n_fluid)?;
+        // A ghosts-only column's fluid values come from the fluid's own fields.
+        let own = |f: Field| slots.iter().flatten().any(|s| s.fluid_reads(f));
+        let wants = |f: &[Field]| f.iter().any(|&f| fields.contains(f) || own(f));
+        let v = match wants(&[Field::Vx, Field::Vy]) {
             true => Some(particles.joined::<Velocity>()?),
             false => None,
         };
@@ -322,39 +325,6 @@ impl Records {
             false => None,
         };
         let (v, p) = (v.as_ref().map(|c| c.view()), p.as_ref().map(|c| c.view()));
-        let len = x.len();
-        // The viscous terms' velocities: the fluid's own, the ghosts' no-slip mirrors
-        // when the walls have them, else the ghosts' `Velocity`.
-        let shear_wanted = wants(&[Field::ShearVx, Field::ShearVy]);
-        let n_fluid = x.fluid.len();
-        let no_slip = match (shear_wanted, extra.no_slip) {
-            (true, Some(ns)) if ns.len() != len - n_fluid => {
-                return Err(StepError::Internal(format!(
-                    "{} no-slip velocities for {} ghosts: they were mirrored for another state",
-                    ns.len(),
-                    len - n_fluid
-                )))
-            }
-            (true, ns) => ns,
-            (false, _) => None,
-        };
-        let grad = match wants(&[Field::GradRhoX, Field::GradRhoY]) {
-            false => None,
-            true => match gradients {
-                Some(g) if g.len() == len => Some(g),
-                Some(g) => {
-                    return Err(StepError::Internal(format!(
-                        "{} density gradients for {len} particles: they were computed for another state",
-                        g.len()
-                    )))
-                }
-                None => {
-                    return Err(StepError::Internal(
-                        "a pair term reads the density gradient, but no stage computed it".into(),
-                    ))
-                }
-            },
-        };
         if len.saturating_mul(16) >= i32::MAX as usize {
             return Err(StepError::Internal(format!(
                 "{len} particles are too many for the packed records' 32-bit offsets"
@@ -374,6 +344,7 @@ impl Records {
         }
         // The fields written: all the layout holds, or just those refreshed.
         let held = if reshape { self.fields } else { fields };
+        let sound = held.contains(Field::Sound) || own(Field::Sound);
         let (stride, offsets) = (self.stride, self.offsets);
         let values: &mut [f64] = bytemuck_lines(&mut self.lines);
         // Blocks of records with a plain loop inside (no call per record).
@@ -384,55 +355,37 @@ impl Records {
             .for_each(|(c, block)| {
                 for (k, out) in block.chunks_exact_mut(stride).enumerate() {
                     let j = (c * PACK_CHUNK + k) as u32;
-                    let mut put = |f: Field, value: f64| {
-                        if held.contains(f) {
-                            out[offsets[f as usize]] = value;
-                        }
-                    };
+                    // j's world fields, in `Field` order (0 where not read).
                     let (xj, rhoj) = (x.get(j).0, rho.get(j).0);
-                    put(Field::X, xj.x);
-                    put(Field::Y, xj.y);
-                    put(Field::Rho, rhoj);
-                    put(Field::Mass, m.get(j).0);
-                    if let Some(v) = &v {
-                        let vj = v.get(j).0;
-                        put(Field::Vx, vj.x);
-                        put(Field::Vy, vj.y);
-                        if shear_wanted {
-                            let vs = match no_slip {
-                                Some(ns) if j as usize >= n_fluid => ns[j as usize - n_fluid],
-                                _ => vj,
-                            };
-                            put(Field::ShearVx, vs.x);
-                            put(Field::ShearVy, vs.y);
+                    let vj = v.as_ref().map_or(DVec2::ZERO, |v| v.get(j).0);
+                    let mut base = [0.0; Field::COUNT];
+                    base[Field::X as usize] = xj.x;
+                    base[Field::Y as usize] = xj.y;
+                    base[Field::Vx as usize] = vj.x;
+                    base[Field::Vy as usize] = vj.y;
+                    base[Field::Rho as usize] = rhoj;
+                    base[Field::Mass as usize] = m.get(j).0;
+                    if let Some(p) = &p {
+                        base[Field::PRho2 as usize] = p.get(j).0 / (rhoj * rhoj);
+                    }
+                    if sound {
+                        base[Field::Sound as usize] = eos.sound_speed(rhoj);
+                    }
+                    for (s, source) in slots.iter().enumerate() {
+                        if let Some(source) = source {
+                            base[Field::SLOTS[s] as usize] =
+                                source.value(j as usize, n_fluid, |f| base[f as usize]);
                         }
                     }
-                    if let Some(p) = &p {
-                        put(Field::PRho2, p.get(j).0 / (rhoj * rhoj));
-                    }
-                    if held.contains(Field::Sound) {
-                        put(Field::Sound, eos.sound_speed(rhoj));
-                    }
-                    if let Some(g) = grad {
-                        put(Field::GradRhoX, g[j as usize].x);
-                        put(Field::GradRhoY, g[j as usize].y);
+                    for f in Field::ALL {
+                        if held.contains(f) {
+                            out[offsets[f as usize]] = base[f as usize];
+                        }
                     }
                 }
             });
         Ok(())
     }
-}
-
-/// What [`Records::pack_with`] packs besides the world's columns, each in the joint
-/// numbering's order.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Packed<'a> {
-    /// The density gradient of every particle (fluid, then ghosts), for `GradRhoX`
-    /// and `GradRhoY`.
-    pub gradients: Option<&'a [DVec2]>,
-    /// Every ghost's no-slip velocity, for `ShearVx` and `ShearVy`
-    /// ([`crate::vocab::NoSlipVelocities`]); None: the ghosts' `Velocity`.
-    pub no_slip: Option<&'a [DVec2]>,
 }
 
 /// The lines as one slice of f64s.
