@@ -99,7 +99,9 @@ pub(crate) fn run(
     const WAVES_D: u16 = WAVES | bits(&[DeltaSph]);
     // Riemann-solver SPH (the dam break's and the sloshing tank's).
     const RIEMANN: u16 = bits(&[RiemannPressure, Continuity, RiemannDiffusion]);
-    if let Some(set) = Fixed::<SPLASH>::of(terms) {
+    if generic_only() {
+        run_set(sim, *terms, out, chunk_power)
+    } else if let Some(set) = Fixed::<SPLASH>::of(terms) {
         run_set(sim, set, out, chunk_power)
     } else if let Some(set) = Fixed::<RIEMANN>::of(terms) {
         run_set(sim, set, out, chunk_power)
@@ -124,6 +126,14 @@ pub(crate) fn run(
     } else {
         run_set(sim, *terms, out, chunk_power)
     }
+}
+
+/// True when the environment variable `SPH_GENERIC_TERMS` is set (to any value): every
+/// term set runs the generic loop, which tests each term per pair, instead of a loop
+/// compiled for it (to measure what the compiled sets buy; the results are the same).
+fn generic_only() -> bool {
+    static GENERIC: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *GENERIC.get_or_init(|| std::env::var_os("SPH_GENERIC_TERMS").is_some())
 }
 
 /// [`run`] for a term set `terms`.

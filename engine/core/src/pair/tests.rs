@@ -66,10 +66,13 @@ fn world(seed: u64) -> hecs::World {
     world
 }
 
+fn eos() -> Tait {
+    Tait::new(1000.0, 30.0, 7.0)
+}
+
 fn packed(world: &hecs::World, fields: Fields) -> Records {
     let mut r = Records::default();
-    let eos = Tait::new(1000.0, 30.0, 7.0);
-    r.pack(&Particles::of(world).unwrap(), fields, &eos)
+    r.pack(&Particles::of(world).unwrap(), fields, &eos())
         .unwrap();
     r
 }
@@ -214,4 +217,159 @@ fn a_missing_field_is_refused() {
     let k = Wendland::new(0.013);
     let err = Pass::new(&Probe, k, &r).err().expect("refused");
     assert_eq!(err.missing, Field::Vx);
+}
+
+/// A vector column of every particle in slots 0 and 1.
+struct Gradient;
+impl ColumnKey for Gradient {
+    const NAME: &'static str = "Gradient";
+    const SLOTS: &'static [Field] = &[Field::Slot0, Field::Slot1];
+}
+
+/// A vector column of the ghosts in slots 2 and 3; the fluid's slots hold its velocity.
+struct GhostVelocity;
+impl ColumnKey for GhostVelocity {
+    const NAME: &'static str = "GhostVelocity";
+    const SLOTS: &'static [Field] = &[Field::Slot2, Field::Slot3];
+}
+
+/// A scalar column that wants slot 1, which `Gradient` holds.
+struct Clashing;
+impl ColumnKey for Clashing {
+    const NAME: &'static str = "Clashing";
+    const SLOTS: &'static [Field] = &[Field::Slot1];
+}
+
+/// A key that names a world field as its slot.
+struct NotASlot;
+impl ColumnKey for NotASlot {
+    const NAME: &'static str = "NotASlot";
+    const SLOTS: &'static [Field] = &[Field::Rho];
+}
+
+const GHOST_VELOCITY: Scope = Scope::Ghosts {
+    fluid: &[Field::Vx, Field::Vy],
+};
+
+/// The packer puts each keyed column's values in its slots, record by record: a
+/// per-particle column as given, a ghosts-only one after the fluid, with the fluid's
+/// slots holding the fields its scope names (here the velocity).
+#[test]
+fn keyed_columns_are_packed_into_their_slots() {
+    let w = world(7);
+    let particles = Particles::of(&w).unwrap();
+    let n = particles.joined::<Position>().unwrap().view().len();
+    let n_fluid = particles.fluid::<Position>().unwrap().len();
+    let v: Vec<DVec2> = {
+        let v = particles.joined::<Velocity>().unwrap();
+        let v = v.view();
+        (0..n as u32).map(|j| v.get(j).0).collect()
+    };
+    assert!(n_fluid > 0 && n > n_fluid);
+    let grad: Vec<DVec2> = (0..n)
+        .map(|j| DVec2::new(j as f64, -2.0 * j as f64))
+        .collect();
+    let ghost: Vec<DVec2> = (0..n - n_fluid)
+        .map(|k| DVec2::new(100.0 + k as f64, 0.5 * k as f64))
+        .collect();
+    let mut columns = Columns::default();
+    columns
+        .insert::<Gradient>(Scope::Particles, grad.clone())
+        .unwrap();
+    columns
+        .insert::<GhostVelocity>(GHOST_VELOCITY, ghost.clone())
+        .unwrap();
+    let fields = Fields::of(&Field::MOMENTUM).with(Fields::of(&Field::SLOTS));
+    let mut r = Records::default();
+    r.pack_with(&particles, fields, &eos(), &columns).unwrap();
+    for j in 0..n {
+        assert_eq!(r.get(j, Field::Slot0), grad[j].x, "record {j}");
+        assert_eq!(r.get(j, Field::Slot1), grad[j].y, "record {j}");
+        let want = if j < n_fluid {
+            v[j]
+        } else {
+            ghost[j - n_fluid]
+        };
+        assert_eq!(r.get(j, Field::Slot2), want.x, "record {j}");
+        assert_eq!(r.get(j, Field::Slot3), want.y, "record {j}");
+        assert_eq!(r.get(j, Field::Vx), v[j].x, "record {j}");
+    }
+}
+
+/// A slot has one meaning: a second key on a held slot is refused with both names;
+/// the same key replaces its values; a key or scope declared wrongly is refused.
+#[test]
+fn a_column_on_another_keys_slot_is_refused() {
+    let mut columns = Columns::default();
+    columns
+        .insert::<Gradient>(Scope::Particles, vec![DVec2::ONE])
+        .unwrap();
+    let err = columns
+        .insert::<Clashing>(Scope::Particles, vec![])
+        .unwrap_err();
+    assert_eq!(
+        err,
+        ColumnError::Clash {
+            new: "Clashing",
+            held: "Gradient",
+            slot: Field::Slot1
+        }
+    );
+    assert!(err.to_string().contains("Clashing") && err.to_string().contains("Gradient"));
+    columns
+        .insert::<Gradient>(Scope::Particles, vec![DVec2::X; 3])
+        .unwrap();
+    assert_eq!(columns.get::<Gradient>(), Some(&[DVec2::X; 3][..]));
+    assert!(matches!(
+        columns.insert::<NotASlot>(Scope::Particles, vec![]),
+        Err(ColumnError::Declaration {
+            name: "NotASlot",
+            ..
+        })
+    ));
+    // A ghosts-only vector column needs two fluid fields, none a slot.
+    for fluid in [&[Field::Vx][..], &[Field::Vx, Field::Slot0][..]] {
+        assert!(matches!(
+            columns.insert::<GhostVelocity>(Scope::Ghosts { fluid }, vec![]),
+            Err(ColumnError::Declaration { .. })
+        ));
+    }
+    assert!(!columns.contains::<GhostVelocity>());
+    assert_eq!(columns.remove::<Gradient>(), Some(vec![DVec2::X; 3]));
+    columns
+        .insert::<Clashing>(Scope::Particles, vec![])
+        .unwrap();
+}
+
+/// A pass that reads a slot no column fills, or a column computed for another
+/// particle count, is an error, not stale or zero values.
+#[test]
+fn a_missing_or_stale_column_is_refused() {
+    let w = world(3);
+    let particles = Particles::of(&w).unwrap();
+    let fields = Fields::of(&[Field::Slot0]);
+    let mut r = Records::default();
+    let err = r
+        .pack_with(&particles, fields, &eos(), &Columns::default())
+        .unwrap_err();
+    assert!(err.to_string().contains("Slot0"), "{err}");
+    let mut columns = Columns::default();
+    columns
+        .insert::<Gradient>(Scope::Particles, vec![DVec2::ONE; 5])
+        .unwrap();
+    let err = r
+        .pack_with(&particles, fields, &eos(), &columns)
+        .unwrap_err();
+    assert!(err.to_string().contains("Gradient holds 5 values"), "{err}");
+    let mut columns = Columns::default();
+    columns
+        .insert::<GhostVelocity>(GHOST_VELOCITY, vec![DVec2::ONE; 2])
+        .unwrap();
+    let err = r
+        .pack_with(&particles, Fields::of(&[Field::Slot3]), &eos(), &columns)
+        .unwrap_err();
+    assert!(
+        err.to_string().contains("GhostVelocity holds 2 values"),
+        "{err}"
+    );
 }
