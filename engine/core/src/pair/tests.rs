@@ -265,6 +265,14 @@ fn keyed_columns_are_packed_into_their_slots() {
         let v = v.view();
         (0..n as u32).map(|j| v.get(j).0).collect()
     };
+    let (pressure, density): (Vec<f64>, Vec<f64>) = {
+        let (p, rho) = (
+            particles.joined::<Pressure>().unwrap(),
+            particles.joined::<Density>().unwrap(),
+        );
+        let (p, rho) = (p.view(), rho.view());
+        (0..n as u32).map(|j| (p.get(j).0, rho.get(j).0)).unzip()
+    };
     assert!(n_fluid > 0 && n > n_fluid);
     let grad: Vec<DVec2> = (0..n)
         .map(|j| DVec2::new(j as f64, -2.0 * j as f64))
@@ -293,6 +301,9 @@ fn keyed_columns_are_packed_into_their_slots() {
         assert_eq!(r.get(j, Field::Slot2), want.x, "record {j}");
         assert_eq!(r.get(j, Field::Slot3), want.y, "record {j}");
         assert_eq!(r.get(j, Field::Vx), v[j].x, "record {j}");
+        let (p, rho) = (pressure[j], density[j]);
+        assert_eq!(r.get(j, Field::PRho2), p / (rho * rho), "record {j}");
+        assert_eq!(r.get(j, Field::Sound), eos().sound_speed(rho), "record {j}");
     }
 }
 
@@ -372,4 +383,53 @@ fn a_missing_or_stale_column_is_refused() {
         err.to_string().contains("GhostVelocity holds 2 values"),
         "{err}"
     );
+}
+
+/// A key with three slots: refused (a column is a scalar or a vector).
+struct ThreeSlots;
+impl ColumnKey for ThreeSlots {
+    const NAME: &'static str = "ThreeSlots";
+    const SLOTS: &'static [Field] = &[Field::Slot0, Field::Slot1, Field::Slot2];
+}
+
+/// A pass that reads only a ghosts-only column's slots still gets the fluid's own
+/// fields there (the packer reads the velocity for it though the pass does not), and
+/// the store's accessors see what was stored.
+#[test]
+fn a_ghost_column_alone_carries_the_fluids_own_fields() {
+    let w = world(11);
+    let particles = Particles::of(&w).unwrap();
+    let n_fluid = particles.fluid::<Position>().unwrap().len();
+    let n = particles.joined::<Position>().unwrap().view().len();
+    let fluid_v: Vec<DVec2> = particles
+        .fluid::<Velocity>()
+        .unwrap()
+        .iter()
+        .map(|v| v.0)
+        .collect();
+    let mut columns = Columns::default();
+    let ghost = vec![DVec2::new(-1.0, 2.0); n - n_fluid];
+    columns
+        .insert::<GhostVelocity>(GHOST_VELOCITY, ghost.clone())
+        .unwrap();
+    assert!(columns.contains::<GhostVelocity>() && !columns.contains::<Gradient>());
+    assert_eq!(columns.heap_bytes(), ghost.capacity() * 16);
+    columns.get_mut::<GhostVelocity>().unwrap()[0] = DVec2::new(5.0, 6.0);
+    assert!(columns.get_mut::<Gradient>().is_none());
+    let mut r = Records::default();
+    r.pack_with(&particles, Fields::of(&Field::SLOTS[2..]), &eos(), &columns)
+        .unwrap();
+    assert!(!r.fields().contains(Field::Vx));
+    for (j, v) in fluid_v.iter().enumerate() {
+        assert_eq!((r.get(j, Field::Slot2), r.get(j, Field::Slot3)), (v.x, v.y));
+    }
+    assert_eq!(r.get(n_fluid, Field::Slot2), 5.0);
+    assert_eq!(r.get(n - 1, Field::Slot3), 2.0);
+    assert!(matches!(
+        columns.insert::<ThreeSlots>(Scope::Particles, vec![]),
+        Err(ColumnError::Declaration {
+            name: "ThreeSlots",
+            ..
+        })
+    ));
 }
