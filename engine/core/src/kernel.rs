@@ -48,8 +48,9 @@ pub trait Kernel: Copy + Send + Sync + 'static {
     }
 }
 
-/// The kernel a scenario selects.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+/// The kernel a scenario selects: a shipped one, or one a plugin registered
+/// ([`PluginKernel`], through `StageRegistry::register_kernel`).
+#[derive(Clone, Copy, Debug)]
 pub enum KernelKind {
     /// Gaussian truncated at R = 3: W = exp(-R^2) / (pi h^2).
     Gaussian,
@@ -61,6 +62,8 @@ pub enum KernelKind {
     Quartic,
     /// Wendland C2: 7/(4 pi h^2) (1 - R/2)^4 (2R + 1), R <= 2.
     Wendland,
+    /// A plugin's kernel.
+    Plugin(PluginKernel),
 }
 
 impl KernelKind {
@@ -68,10 +71,26 @@ impl KernelKind {
     pub fn support_factor(self) -> f64 {
         match self {
             KernelKind::Gaussian => 3.0,
+            KernelKind::Plugin(p) => p.support,
             _ => 2.0,
         }
     }
-    /// All kernels, for tests and studies.
+    /// The name a scenario writes.
+    pub fn name(self) -> &'static str {
+        match self {
+            KernelKind::Gaussian => "Gaussian",
+            KernelKind::Quadratic => "Quadratic",
+            KernelKind::Cubic => "Cubic",
+            KernelKind::Quartic => "Quartic",
+            KernelKind::Wendland => "Wendland",
+            KernelKind::Plugin(p) => p.name,
+        }
+    }
+    /// The shipped kernel named `name`.
+    pub fn shipped(name: &str) -> Option<KernelKind> {
+        KernelKind::ALL.into_iter().find(|k| k.name() == name)
+    }
+    /// All shipped kernels, for tests and studies.
     pub const ALL: [KernelKind; 5] = [
         KernelKind::Gaussian,
         KernelKind::Quadratic,
@@ -79,6 +98,130 @@ impl KernelKind {
         KernelKind::Quartic,
         KernelKind::Wendland,
     ];
+}
+
+/// Two kernels are the same when their names are.
+impl PartialEq for KernelKind {
+    fn eq(&self, other: &Self) -> bool {
+        self.name() == other.name()
+    }
+}
+impl Eq for KernelKind {}
+
+impl Serialize for KernelKind {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_unit_variant("KernelKind", 0, self.name())
+    }
+}
+
+/// Reads a shipped kernel's name; a plugin's needs the registry
+/// (`sph_core::registry::KernelSeed`).
+impl<'de> Deserialize<'de> for KernelKind {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        crate::registry::KernelSeed(&Default::default()).deserialize_kind(d)
+    }
+}
+
+/// A kernel's shape as a plugin writes it, once over [`Lane`]: W(r, h) = NORM / h^2
+/// w(q) with q = r/h, zero from q = SUPPORT on. `dw` is dw/dq and `dw_over_q` is
+/// (dw/dq)/q, in closed form (finite at q = 0), as for the shipped kernels.
+pub trait KernelShape: Send + Sync + 'static {
+    /// The 2D normalisation: W integrates to 1 over the plane.
+    const NORM: f64;
+    /// The support radius in units of h.
+    const SUPPORT: f64;
+    fn w<L: Lane>(q: L) -> L;
+    fn dw<L: Lane>(q: L) -> L;
+    fn dw_over_q<L: Lane>(q: L) -> L;
+}
+
+/// A registered plugin kernel: its name, support and shape functions. Built once
+/// per process by the registry; a pass gets the kernel for one smoothing length
+/// with [`PluginKernel::at`].
+#[derive(Clone, Copy)]
+pub struct PluginKernel {
+    name: &'static str,
+    support: f64,
+    norm: f64,
+    w: crate::pair::ShapeFn,
+    dw: crate::pair::ShapeFn,
+    dw_over_q: crate::pair::ShapeFn,
+}
+
+impl std::fmt::Debug for PluginKernel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PluginKernel")
+            .field("name", &self.name)
+            .finish()
+    }
+}
+
+impl PluginKernel {
+    /// Shape `K` under `name`.
+    pub fn new<K: KernelShape>(name: &'static str) -> Self {
+        Self {
+            name,
+            support: K::SUPPORT,
+            norm: K::NORM,
+            w: crate::pair::shape_fn::<K, 0>(),
+            dw: crate::pair::shape_fn::<K, 1>(),
+            dw_over_q: crate::pair::shape_fn::<K, 2>(),
+        }
+    }
+    pub fn name(&self) -> &'static str {
+        self.name
+    }
+    /// The kernel for smoothing length `h`.
+    pub fn at(&self, h: f64) -> DynKernel {
+        let (inv_h, norm) = (1.0 / h, self.norm / (h * h));
+        DynKernel {
+            inv_h,
+            norm,
+            norm_dw: norm * inv_h,
+            norm_grad: norm * inv_h * inv_h,
+            support_q: self.support,
+            support: self.support * h,
+            shape: *self,
+        }
+    }
+}
+
+/// A plugin kernel for one smoothing length: the same arithmetic as a shipped
+/// kernel's around the plugin's shape, which is one indirect call per evaluation
+/// and group of lanes.
+#[derive(Clone, Copy, Debug)]
+pub struct DynKernel {
+    inv_h: f64,
+    norm: f64,
+    norm_dw: f64,
+    norm_grad: f64,
+    support_q: f64,
+    support: f64,
+    shape: PluginKernel,
+}
+
+impl Kernel for DynKernel {
+    #[inline(always)]
+    fn support(&self) -> f64 {
+        self.support
+    }
+    #[inline(always)]
+    fn inv_h(&self) -> f64 {
+        self.inv_h
+    }
+    #[inline(always)]
+    fn w_at<L: Lane>(&self, q: L) -> L {
+        (L::splat(self.norm) * L::shape(&self.shape.w, q)).keep(q.lt(L::splat(self.support_q)))
+    }
+    #[inline(always)]
+    fn dw_dr_at<L: Lane>(&self, q: L) -> L {
+        (L::splat(self.norm_dw) * L::shape(&self.shape.dw, q)).keep(q.lt(L::splat(self.support_q)))
+    }
+    #[inline(always)]
+    fn grad_factor_at<L: Lane>(&self, q: L, r: L) -> L {
+        let inside = L::and(q.lt(L::splat(self.support_q)), L::zero().lt(r));
+        (L::splat(self.norm_grad) * L::shape(&self.shape.dw_over_q, q)).keep(inside)
+    }
 }
 
 /// A kernel type for one smoothing length: its normalisation and its shape functions
@@ -234,6 +377,10 @@ macro_rules! with_kernel {
             }
             KernelKind::Wendland => {
                 let $k = Wendland::new($h);
+                $body
+            }
+            KernelKind::Plugin(p) => {
+                let $k = p.at($h);
                 $body
             }
         }

@@ -2,6 +2,7 @@
 //! parameters straight from the scenario file, so a parameter error carries the
 //! file's line and column. Plugins add stages with [`StageRegistry::register`].
 
+use crate::kernel::{KernelKind, KernelShape, PluginKernel};
 use crate::stage::Stage;
 use crate::terms::{Term, TermRegistry};
 use serde::de::DeserializeOwned;
@@ -57,6 +58,8 @@ pub struct StageRegistry {
     entries: BTreeMap<String, Arc<Entry>>,
     /// The pair terms plugins add to `Forces(terms: [...])`.
     terms: TermRegistry,
+    /// The kernels plugins add to a scenario's `kernel:`.
+    kernels: KernelRegistry,
 }
 
 /// A stage built from a scenario's pipeline entry.
@@ -144,6 +147,28 @@ impl StageRegistry {
         &self.terms
     }
 
+    /// Registers kernel shape `K` under `name`, which a scenario then names as
+    /// `kernel: Name` (docs/architecture.md, "Plugins: adding a kernel").
+    ///
+    /// # Panics
+    /// If `name` is not a CamelCase identifier or is a shipped kernel's.
+    pub fn register_kernel<K: KernelShape>(&mut self, name: &'static str, summary: &'static str) {
+        assert!(
+            name.starts_with(|c: char| c.is_ascii_uppercase())
+                && name.chars().all(|c| c.is_ascii_alphanumeric())
+                && KernelKind::shipped(name).is_none(),
+            "kernel name `{name}`: write it CamelCase, and not a shipped kernel's"
+        );
+        self.kernels
+            .0
+            .insert(name, (PluginKernel::new::<K>(name), summary));
+    }
+
+    /// The kernels registered by plugins.
+    pub fn kernels(&self) -> &KernelRegistry {
+        &self.kernels
+    }
+
     pub fn contains(&self, name: &str) -> bool {
         self.entries.contains_key(name)
     }
@@ -227,6 +252,72 @@ pub fn camel_case(name: &str) -> String {
             })
         })
         .collect()
+}
+
+/// The kernels plugins registered, by name, with their one-line summaries.
+#[derive(Clone, Debug, Default)]
+pub struct KernelRegistry(BTreeMap<&'static str, (PluginKernel, &'static str)>);
+
+impl KernelRegistry {
+    /// The registered kernel named `name`.
+    pub fn get(&self, name: &str) -> Option<PluginKernel> {
+        self.0.get(name).map(|k| k.0)
+    }
+    /// Registered names with their summaries, sorted.
+    pub fn list(&self) -> impl Iterator<Item = (&'static str, &'static str)> + '_ {
+        self.0.iter().map(|(n, k)| (*n, k.1))
+    }
+}
+
+/// Reads a scenario's `kernel: Name`: a shipped kernel, or one in the registry; an
+/// unknown name is refused with the list of known ones.
+#[derive(Clone, Copy)]
+pub struct KernelSeed<'a>(pub &'a KernelRegistry);
+
+impl KernelSeed<'_> {
+    /// Reads the kernel's name from `d`.
+    pub fn deserialize_kind<'de, D: serde::Deserializer<'de>>(
+        self,
+        d: D,
+    ) -> Result<KernelKind, D::Error> {
+        use serde::de::DeserializeSeed;
+        self.deserialize(d)
+    }
+}
+
+impl<'de> serde::de::DeserializeSeed<'de> for KernelSeed<'_> {
+    type Value = KernelKind;
+    fn deserialize<D: serde::Deserializer<'de>>(self, d: D) -> Result<KernelKind, D::Error> {
+        const SHIPPED: &[&str] = &["Gaussian", "Quadratic", "Cubic", "Quartic", "Wendland"];
+        d.deserialize_enum("KernelKind", SHIPPED, self)
+    }
+}
+
+impl<'de> serde::de::Visitor<'de> for KernelSeed<'_> {
+    type Value = KernelKind;
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("a kernel, e.g. Wendland")
+    }
+    fn visit_enum<A: serde::de::EnumAccess<'de>>(self, data: A) -> Result<KernelKind, A::Error> {
+        use serde::de::{Error, VariantAccess};
+        let (name, variant) = data.variant_seed(Identifier("a kernel's name"))?;
+        let kind = KernelKind::shipped(&name)
+            .or_else(|| self.0.get(&name).map(KernelKind::Plugin))
+            .ok_or_else(|| {
+                let known: Vec<String> = KernelKind::ALL
+                    .iter()
+                    .map(|k| k.name())
+                    .chain(self.0.list().map(|(n, _)| n))
+                    .map(|n| format!("`{n}`"))
+                    .collect();
+                A::Error::custom(format!(
+                    "unknown variant `{name}`, expected one of {}",
+                    known.join(", ")
+                ))
+            })?;
+        variant.unit_variant()?;
+        Ok(kind)
+    }
 }
 
 /// Reads a bare identifier (a stage's name, a pair term's, a field's) as text; the

@@ -143,6 +143,9 @@ pub(crate) mod sealed {
             r: &mut crate::pair::Rates<Self>,
         ) where
             Self: super::Lane;
+        /// A plugin kernel's shape function at `q`, through the function compiled
+        /// for this lane type ([`crate::kernel::PluginKernel`]).
+        fn shape(f: &crate::pair::ShapeFn, q: Self) -> Self;
         /// Record offsets of a group of neighbours, with the lanes in use.
         type Index: Copy;
         /// The group `js` (1 to `WIDTH` joint indices) of a buffer of `len` records of
@@ -192,6 +195,10 @@ pub(crate) mod sealed {
             r: &mut crate::pair::Rates<f64>,
         ) {
             (t.fns.scalar)(t.term(), me, p, r)
+        }
+        #[inline(always)]
+        fn shape(f: &crate::pair::ShapeFn, q: f64) -> f64 {
+            (f.scalar)(q)
         }
         type Index = usize;
         #[inline(always)]

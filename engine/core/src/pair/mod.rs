@@ -42,7 +42,8 @@ mod x86;
 
 pub use columns::{ColumnError, ColumnKey, Columns, Scope};
 pub use lane::{whole_pow, Lane};
-pub use plugin::{NoTerms, PluginTerm, WithPlugins};
+pub(crate) use plugin::shape_fn;
+pub use plugin::{NoTerms, PluginTerm, ShapeFn, WithPlugins};
 pub use rates::{EquationsOfMotion, RateSums, RateTerm, Rates};
 pub use record::{Field, Fields, Records};
 

@@ -129,3 +129,40 @@ impl RateTerm for NoTerms {
     #[inline(always)]
     fn pair<L: Lane>(&self, _: &Me, _: &Pair<L>, _: &mut Rates<L>) {}
 }
+
+/// One kernel shape function ([`crate::kernel::KernelShape`]: `F` 0 for w, 1 for
+/// dw/dq, 2 for (dw/dq)/q) compiled for each lane type, the SIMD ones with their
+/// instructions enabled so the shape is inlined in them.
+#[derive(Clone, Copy)]
+pub struct ShapeFn {
+    pub(super) scalar: fn(f64) -> f64,
+    /// # Safety
+    /// The processor has AVX-512F and AVX-512VL.
+    #[cfg(target_arch = "x86_64")]
+    pub(super) avx512: unsafe fn(super::x86::Avx512) -> super::x86::Avx512,
+    /// # Safety
+    /// The processor has AVX2.
+    #[cfg(target_arch = "x86_64")]
+    pub(super) avx2: unsafe fn(super::x86::Avx2) -> super::x86::Avx2,
+}
+
+/// Shape function `F` of kernel `K` for every lane type.
+pub(crate) fn shape_fn<K: crate::kernel::KernelShape, const F: u8>() -> ShapeFn {
+    ShapeFn {
+        scalar: shape::<K, F, f64>,
+        #[cfg(target_arch = "x86_64")]
+        avx512: super::x86::shape_avx512::<K, F>,
+        #[cfg(target_arch = "x86_64")]
+        avx2: super::x86::shape_avx2::<K, F>,
+    }
+}
+
+/// Shape function `F` of `K` at `q`.
+#[inline(always)]
+pub(super) fn shape<K: crate::kernel::KernelShape, const F: u8, L: Lane>(q: L) -> L {
+    match F {
+        0 => K::w(q),
+        1 => K::dw(q),
+        _ => K::dw_over_q(q),
+    }
+}

@@ -8,6 +8,7 @@
 
 use super::lane::{sealed::Gather, Lane};
 use super::{Kernel, Me, Pair, PairTerm, Pass, PluginTerm, RateTerm, Rates};
+use crate::kernel::KernelShape;
 use std::any::Any;
 use std::arch::x86_64::*;
 use std::ops::{Add, Div, Mul, Neg, Sub};
@@ -44,6 +45,25 @@ pub(super) unsafe fn plugin_avx512<T: RateTerm + 'static>(
     if let Some(t) = t.downcast_ref::<T>() {
         t.pair(me, p, r)
     }
+}
+
+/// Shape function `F` of plugin kernel `K` in AVX-512 lanes, compiled with those
+/// instructions.
+///
+/// # Safety
+/// The processor has AVX-512F and AVX-512VL.
+#[target_feature(enable = "avx512f,avx512vl")]
+pub(super) unsafe fn shape_avx512<K: KernelShape, const F: u8>(q: Avx512) -> Avx512 {
+    super::plugin::shape::<K, F, Avx512>(q)
+}
+
+/// The same in AVX2 lanes.
+///
+/// # Safety
+/// The processor has AVX2.
+#[target_feature(enable = "avx2")]
+pub(super) unsafe fn shape_avx2<K: KernelShape, const F: u8>(q: Avx2) -> Avx2 {
+    super::plugin::shape::<K, F, Avx2>(q)
 }
 
 /// The same in AVX2 lanes.
@@ -183,6 +203,11 @@ impl Gather for Avx512 {
         // SAFETY: a value of this type (here `p`'s lanes) exists only on a processor
         // with its instructions (module documentation).
         unsafe { (t.fns.avx512)(t.term(), me, p, r) }
+    }
+    #[inline(always)]
+    fn shape(f: &super::ShapeFn, q: Self) -> Self {
+        // SAFETY: as for `plugin_pair` (`q` is a value of this type).
+        unsafe { (f.avx512)(q) }
     }
     type Index = (__m256i, __mmask8);
     #[inline(always)]
@@ -365,6 +390,11 @@ impl Gather for Avx2 {
         // SAFETY: a value of this type (here `p`'s lanes) exists only on a processor
         // with its instructions (module documentation).
         unsafe { (t.fns.avx2)(t.term(), me, p, r) }
+    }
+    #[inline(always)]
+    fn shape(f: &super::ShapeFn, q: Self) -> Self {
+        // SAFETY: as for `plugin_pair` (`q` is a value of this type).
+        unsafe { (f.avx2)(q) }
     }
     /// Record offsets, and the lanes in use as a mask.
     type Index = ([__m128i; 2], [__m256d; 2]);

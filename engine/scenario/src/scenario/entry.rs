@@ -2,6 +2,7 @@
 //! scenario text through the stage registry, so parameter errors keep their position.
 
 use super::*;
+use sph_core::registry::KernelSeed;
 
 /// One stage of the pipeline, as built from the file.
 pub struct PipelineEntry {
@@ -106,7 +107,11 @@ impl<'de> Visitor<'de> for ScenarioSeed<'_> {
                 Key::EndTime => take!(end_time, "end_time", map.next_value()?),
                 Key::Fluid => take!(fluid, "fluid", map.next_value()?),
                 Key::Resolution => take!(resolution, "resolution", map.next_value()?),
-                Key::Kernel => take!(kernel, "kernel", map.next_value()?),
+                Key::Kernel => take!(
+                    kernel,
+                    "kernel",
+                    map.next_value_seed(KernelSeed(self.0.kernels()))?
+                ),
                 Key::HOverDx => take!(h_over_dx, "h_over_dx", map.next_value()?),
                 Key::Tank => take!(tank, "tank", map.next_value()?),
                 Key::Walls => take!(walls, "walls", map.next_value()?),
