@@ -118,7 +118,8 @@ impl Serialize for KernelKind {
 /// (`sph_core::registry::KernelSeed`).
 impl<'de> Deserialize<'de> for KernelKind {
     fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        crate::registry::KernelSeed(&Default::default()).deserialize_kind(d)
+        use serde::de::DeserializeSeed;
+        crate::registry::KernelSeed(&Default::default()).deserialize(d)
     }
 }
 

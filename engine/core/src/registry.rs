@@ -274,17 +274,6 @@ impl KernelRegistry {
 #[derive(Clone, Copy)]
 pub struct KernelSeed<'a>(pub &'a KernelRegistry);
 
-impl KernelSeed<'_> {
-    /// Reads the kernel's name from `d`.
-    pub fn deserialize_kind<'de, D: serde::Deserializer<'de>>(
-        self,
-        d: D,
-    ) -> Result<KernelKind, D::Error> {
-        use serde::de::DeserializeSeed;
-        self.deserialize(d)
-    }
-}
-
 impl<'de> serde::de::DeserializeSeed<'de> for KernelSeed<'_> {
     type Value = KernelKind;
     fn deserialize<D: serde::Deserializer<'de>>(self, d: D) -> Result<KernelKind, D::Error> {
