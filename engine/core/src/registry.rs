@@ -2,6 +2,7 @@
 //! parameters straight from the scenario file, so a parameter error carries the
 //! file's line and column. Plugins add stages with [`StageRegistry::register`].
 
+use crate::extraction::{ExtractionMethod, ExtractionRegistry};
 use crate::kernel::{KernelKind, KernelShape, PluginKernel};
 use crate::stage::Stage;
 use crate::terms::{Term, TermRegistry};
@@ -60,6 +61,8 @@ pub struct StageRegistry {
     terms: TermRegistry,
     /// The kernels plugins add to a scenario's `kernel:`.
     kernels: KernelRegistry,
+    /// The wall-pressure extraction methods `Probe(methods: [...])` names.
+    extractions: ExtractionRegistry,
 }
 
 /// A stage built from a scenario's pipeline entry.
@@ -167,6 +170,34 @@ impl StageRegistry {
     /// The kernels registered by plugins.
     pub fn kernels(&self) -> &KernelRegistry {
         &self.kernels
+    }
+
+    /// Registers wall-pressure extraction method `M` under `name`, which a scenario then
+    /// names in `Probe(methods: [...])`; its `probes.csv` columns end in the name in
+    /// snake_case (docs/architecture.md, "Plugins: adding an extraction method").
+    ///
+    /// # Panics
+    /// If `name` is not a CamelCase identifier or is already registered.
+    pub fn register_extraction<M: ExtractionMethod + Default>(
+        &mut self,
+        name: &'static str,
+        summary: &'static str,
+    ) {
+        fn make<M: ExtractionMethod + Default>() -> Box<dyn ExtractionMethod> {
+            Box::new(M::default())
+        }
+        assert!(
+            name.starts_with(|c: char| c.is_ascii_uppercase())
+                && name.chars().all(|c| c.is_ascii_alphanumeric())
+                && self.extractions.get(name).is_none(),
+            "extraction method `{name}`: write it CamelCase, once"
+        );
+        self.extractions.0.insert(name, (make::<M>, summary));
+    }
+
+    /// The registered wall-pressure extraction methods.
+    pub fn extractions(&self) -> &ExtractionRegistry {
+        &self.extractions
     }
 
     pub fn contains(&self, name: &str) -> bool {
@@ -356,6 +387,97 @@ impl<'de, S: serde::de::DeserializeSeed<'de> + Copy> serde::de::Visitor<'de> for
         }
         Ok(list)
     }
+}
+
+/// Reads a parameter struct `P` (deriving `Deserialize`, with
+/// `#[serde(default, deny_unknown_fields)]`) of which one field, `field`, needs the
+/// registry: that field's value is read with `seed` (give the field
+/// `#[serde(skip_deserializing)]` in `P`), every other by `P`'s own derived code, in
+/// one pass over the text, so every error keeps its position. Returns `P` and the
+/// seeded value, if the field was written.
+pub fn read_with_seeded_field<'de, P, S, D>(
+    d: D,
+    field: &'static str,
+    seed: S,
+) -> Result<(P, Option<S::Value>), D::Error>
+where
+    P: serde::Deserialize<'de>,
+    S: serde::de::DeserializeSeed<'de>,
+    D: serde::Deserializer<'de>,
+{
+    use serde::de::{value::MapAccessDeserializer, Error, MapAccess, Visitor};
+    use std::marker::PhantomData;
+
+    /// Passes the keys through to `P`, all but `field`, whose value it reads with the seed.
+    struct Filter<'a, A, S, V> {
+        inner: &'a mut A,
+        field: &'static str,
+        seed: &'a mut Option<S>,
+        value: &'a mut Option<V>,
+    }
+    impl<'de, A, S> MapAccess<'de> for Filter<'_, A, S, S::Value>
+    where
+        A: MapAccess<'de>,
+        S: serde::de::DeserializeSeed<'de>,
+    {
+        type Error = A::Error;
+        fn next_key_seed<K: serde::de::DeserializeSeed<'de>>(
+            &mut self,
+            key_seed: K,
+        ) -> Result<Option<K::Value>, A::Error> {
+            loop {
+                let Some(key) = self.inner.next_key::<String>()? else {
+                    return Ok(None);
+                };
+                if key != self.field {
+                    return key_seed
+                        .deserialize(serde::de::value::StringDeserializer::new(key))
+                        .map(Some);
+                }
+                let Some(seed) = self.seed.take() else {
+                    return Err(A::Error::duplicate_field(self.field));
+                };
+                *self.value = Some(self.inner.next_value_seed(seed)?);
+            }
+        }
+        fn next_value_seed<V: serde::de::DeserializeSeed<'de>>(
+            &mut self,
+            seed: V,
+        ) -> Result<V::Value, A::Error> {
+            self.inner.next_value_seed(seed)
+        }
+    }
+    struct Reader<P, S> {
+        field: &'static str,
+        seed: S,
+        p: PhantomData<P>,
+    }
+    impl<'de, P, S> Visitor<'de> for Reader<P, S>
+    where
+        P: serde::Deserialize<'de>,
+        S: serde::de::DeserializeSeed<'de>,
+    {
+        type Value = (P, Option<S::Value>);
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            f.write_str("a stage's parameters, `(field: value, ...)`")
+        }
+        fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
+            let (mut seed, mut value) = (Some(self.seed), None);
+            let filter = Filter {
+                inner: &mut map,
+                field: self.field,
+                seed: &mut seed,
+                value: &mut value,
+            };
+            let p = P::deserialize(MapAccessDeserializer::new(filter))?;
+            Ok((p, value))
+        }
+    }
+    d.deserialize_map(Reader {
+        field,
+        seed,
+        p: PhantomData,
+    })
 }
 
 /// RON options: `IMPLICIT_SOME` lets optional fields be written without `Some(..)`;

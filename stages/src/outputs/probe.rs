@@ -3,17 +3,11 @@
 //! into `probes.csv` (column `time`, then `<sensor>.<method>`, `<gauge>`, `front`, ...)
 //! and plotted at the end of the run.
 //!
-//! Pressure extraction (docs/physics.md, "Wall-pressure extraction"):
-//! - Method I (`shepard`): Shepard interpolation of fluid and ghost pressures at the
-//!   sensor point.
-//! - Method II (`nearest`): the nearest fluid particle's pressure, corrected to the
-//!   sensor's depth: P = p_n + rho_0 g . (x_s - x_n), so a deeper point reads more.
-//! - Method III (`averaged`, Oger et al. 2005): fluid particles within 1.5 h of the wall
-//!   whose projection falls inside the sensor width S, projected onto the wall with the
-//!   same hydrostatic correction, sorted along the wall abscissa q and averaged with
-//!   weights dS_k = (q_{k+1} - q_{k-1})/2 (the sensor's edges close the ends).
-//!
-//! A sensor with no fluid within the kernel support reads 0 (dry).
+//! Pressure extraction: each sensor is read by the methods `methods` names, the
+//! shipped Methods I, II and III (`Shepard`, `Nearest`, `Averaged`, in `probe/methods.rs`)
+//! or a plugin's ([`sph_core::extraction`]). Wave gauges are in `probe/gauges.rs`, the
+//! flow diagnostics (front, column height, density, speed, neighbours, roll moment,
+//! piston) in `probe/diagnostics.rs`.
 //!
 //! In a moving tank, sensors ride on their walls, the hydrostatic carry uses the
 //! effective gravity g - a_w of the tank frame, and gauges measure the elevation above
@@ -26,16 +20,17 @@
 //! on the walls without needing a wall integration; at rest it is the moment of the
 //! liquid's weight.
 
-mod extraction;
-pub use extraction::roll_moment;
+mod diagnostics;
+mod gauges;
+mod methods;
+pub use diagnostics::roll_moment;
+pub use methods::{Averaged, Nearest, Shepard};
 use sph_core::sim::Counter;
 /// Reads a counter from the sim's diagnostics.
 type ReadCount = fn(&std::collections::BTreeMap<String, f64>) -> f64;
 use crate::vocab::{DensityFloored, WallReflections};
-use extraction::*;
 
 use crate::transducer::{face_offsets, BoxFilter};
-use glam::DVec2;
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::{
@@ -43,45 +38,29 @@ use sph_core::components::{
     Tank, Velocity, Wall, WaveGauge,
 };
 use sph_core::contract::Access;
-use sph_core::kernel;
+use sph_core::extraction::{
+    Carry, ExtractionMethod, MethodFactory, MethodListSeed, MethodName, Site,
+};
 use sph_core::kinematics;
-use sph_core::motion::Pose;
+use sph_core::registry::read_with_seeded_field;
 use sph_core::series::SeriesWriter;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{BodyPose, Guarded, Neighbours, Piston, WallPose};
-use sph_core::world::{archetype, column, Particles};
+use sph_core::world::{archetype, Particles};
 use sph_core::StageRegistry;
 use sph_output::SeriesPlot;
-
-/// A wall-pressure extraction method.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub enum Method {
-    /// Method I: Shepard interpolation at the sensor point.
-    Shepard,
-    /// Method II: nearest particle, hydrostatically corrected.
-    Nearest,
-    /// Method III: Oger's pseudo-sensor average over the sensor width.
-    Averaged,
-}
-
-impl Method {
-    fn suffix(self) -> &'static str {
-        match self {
-            Method::Shepard => "shepard",
-            Method::Nearest => "nearest",
-            Method::Averaged => "averaged",
-        }
-    }
-}
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Params {
     /// Sampling interval [s]; 0 samples every step. Default 0.005.
     pub interval: f64,
-    /// Extraction methods for every pressure sensor. Default [Shepard, Nearest, Averaged].
-    pub methods: Vec<Method>,
+    /// Extraction methods for every pressure sensor, each named once: the shipped
+    /// `Shepard`, `Nearest`, `Averaged` (Methods I, II, III) or a plugin's. Default
+    /// [Shepard, Nearest, Averaged].
+    #[serde(skip_deserializing)]
+    pub methods: Vec<MethodName>,
     /// Surge front: largest x of fluid touching the floor (y < ds), plus ds/2. Default false.
     pub front: bool,
     /// Column height: largest y of fluid at the left wall (x < ds), plus ds/2. Default false.
@@ -113,7 +92,7 @@ impl Default for Params {
     fn default() -> Self {
         Self {
             interval: 0.005,
-            methods: vec![Method::Shepard, Method::Nearest, Method::Averaged],
+            methods: ["Shepard", "Nearest", "Averaged"].map(MethodName).into(),
             front: false,
             column_height: false,
             density_fluctuation: false,
@@ -126,11 +105,51 @@ impl Default for Params {
     }
 }
 
+/// Reads [`Params`], `methods` through the registry's extraction methods; returns the
+/// methods' factories beside them, in list order.
+fn read_params(
+    registry: &StageRegistry,
+    de: &mut dyn erased_serde::Deserializer,
+) -> Result<(Params, Vec<MethodFactory>), erased_serde::Error> {
+    use serde::de::Error;
+    let known = registry.extractions();
+    let (mut p, named): (Params, _) = read_with_seeded_field(de, "methods", MethodListSeed(known))?;
+    if let Some(named) = named {
+        p.methods = named;
+    }
+    let factories = p
+        .methods
+        .iter()
+        .map(|m| {
+            known.get(m.0).map(|(_, make)| make).ok_or_else(|| {
+                Error::custom(format!(
+                    "field `methods`: no extraction method `{}` is registered",
+                    m.0
+                ))
+            })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok((p, factories))
+}
+
+/// The parameters with the methods' factories, as `read_params` returns them; written
+/// to the resolved scenario as the parameters alone.
+struct Read(Params, Vec<MethodFactory>);
+
+impl Serialize for Read {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        self.0.serialize(s)
+    }
+}
+
+/// Registers the probe stage and the shipped extraction methods.
 pub fn register(registry: &mut StageRegistry) {
-    registry.register_checked(
+    methods::register(registry);
+    registry.register_read(
         "probe",
         "pressure sensors, wave gauges, front, column height, statistics",
-        |p: Params| {
+        |registry, de| read_params(registry, de).map(|(p, f)| Read(p, f)),
+        |Read(p, factories)| {
             if !(p.interval >= 0.0 && p.interval.is_finite()) {
                 return Err(sph_core::ParamError::new(
                     "interval",
@@ -138,8 +157,15 @@ pub fn register(registry: &mut StageRegistry) {
                     "seconds >= 0",
                 ));
             }
+            let methods = p
+                .methods
+                .iter()
+                .map(|m| m.suffix())
+                .zip(factories.iter().map(|make| make()))
+                .collect();
             Ok(Probe {
                 params: p,
+                methods,
                 sensors: Vec::new(),
                 gauges: Vec::new(),
                 moving: false,
@@ -148,7 +174,6 @@ pub fn register(registry: &mut StageRegistry) {
                 filters: Vec::new(),
                 guard_counts: [0.0; 2],
                 out: None,
-                scratch: Default::default(),
             })
         },
     );
@@ -156,6 +181,8 @@ pub fn register(registry: &mut StageRegistry) {
 
 pub struct Probe {
     params: Params,
+    /// The extraction methods, with their column suffixes, in `params.methods` order.
+    methods: Vec<(String, Box<dyn ExtractionMethod>)>,
     sensors: Vec<PressureSensor>,
     gauges: Vec<WaveGauge>,
     /// Something in the scene moves (gauges then measure in the tank frame).
@@ -169,8 +196,6 @@ pub struct Probe {
     /// The guard diagnostics ([`GUARD_COUNTS`]) at the previous sample.
     guard_counts: [f64; 2],
     out: Option<SeriesWriter>,
-    /// Method III's buffers, reused from reading to reading.
-    scratch: std::cell::RefCell<Scratch>,
 }
 
 /// The guards' counters (written by `Integrate` or `Advance`) and the probes.csv
@@ -192,7 +217,7 @@ impl Stage for Probe {
             .sensors
             .iter()
             .filter(|s| s.filter > 0.0)
-            .flat_map(|s| self.params.methods.iter().map(|_| BoxFilter::new(s.filter)))
+            .flat_map(|s| self.methods.iter().map(|_| BoxFilter::new(s.filter)))
             .collect();
         self.gauges = sph_core::world::cloned::<WaveGauge>(&sim.world);
         self.moving = kinematics::moving(&sim.world);
@@ -202,12 +227,18 @@ impl Stage for Probe {
             .with::<(&Piston, &Wall)>()
             .iter()
             .next();
-        let needs_grid = !self.sensors.is_empty() && self.params.methods.contains(&Method::Shepard);
-        if needs_grid && !sim.resources.contains::<Neighbours>() {
-            return Err(err(
-                "Method I (Shepard) needs the neighbour grid: put NeighbourGrid() before Probe()"
-                    .into(),
-            ));
+        let needs_grid = self
+            .methods
+            .iter()
+            .zip(&self.params.methods)
+            .find(|(m, _)| m.1.needs_grid());
+        if let Some((_, name)) = needs_grid.filter(|_| !self.sensors.is_empty()) {
+            if !sim.resources.contains::<Neighbours>() {
+                return Err(err(format!(
+                    "method `{}` needs the neighbour grid: put NeighbourGrid() before Probe()",
+                    name.0
+                )));
+            }
         }
         if !self.gauges.is_empty() && !sim.resources.contains::<Neighbours>() {
             return Err(err(
@@ -344,10 +375,9 @@ impl Stage for Probe {
         let title = |what: &str| format!("{}: {what}", sim.name);
         for s in &self.sensors {
             let names: Vec<String> = self
-                .params
                 .methods
                 .iter()
-                .map(|m| format!("{}.{}", s.name, m.suffix()))
+                .map(|(suffix, _)| format!("{}.{suffix}", s.name))
                 .collect();
             let refs: Vec<&str> = names.iter().map(String::as_str).collect();
             out.plot(
@@ -474,10 +504,10 @@ impl Probe {
     fn columns(&self) -> Vec<String> {
         let mut c = Vec::new();
         for s in &self.sensors {
-            for m in &self.params.methods {
-                c.push(format!("{}.{}", s.name, m.suffix()));
+            for (suffix, _) in &self.methods {
+                c.push(format!("{}.{suffix}", s.name));
                 if s.transducer() {
-                    c.push(format!("{}.{}.transducer", s.name, m.suffix()));
+                    c.push(format!("{}.{suffix}.transducer", s.name));
                 }
             }
         }
@@ -511,257 +541,86 @@ impl Probe {
         c
     }
 
-    fn sample(&self, sim: &Sim) -> Result<Vec<f64>, StepError> {
+    fn sample(&mut self, sim: &Sim) -> Result<Vec<f64>, StepError> {
         let _span = tracing::info_span!("sample").entered();
         let Some(particles) = Particles::of(&sim.world) else {
             return Ok(vec![0.0; self.columns().len()]);
         };
-        let x = particles.fluid::<Position>()?;
-        let ds = sim.constants.spacing;
-        // The scene as the world holds it now: the tank's pose (at rest at the origin
-        // without a tank), the sensors' walls.
+        // The tank's pose now (at rest at the origin without a tank).
         let pose = kinematics::tank_pose(&sim.world).unwrap_or_default();
-        let wall_now = |e: hecs::Entity| {
-            sim.world
-                .get::<&WallPose>(e)
-                .map(|w| *w)
-                .map_err(|_| StepError::Internal("a probed wall is not in the world".into()))
-        };
         let mut row = Vec::new();
         let mut filters = self.filters.iter();
         for s in &self.sensors {
-            for &m in &self.params.methods {
-                row.push(self.reading(sim, particles, s, m, 0.0)?);
+            for (_, m) in &mut self.methods {
+                row.push(reading(sim, particles, s, m.as_mut(), 0.0)?);
                 if s.filter > 0.0 {
                     row.push(filters.next().map_or(0.0, BoxFilter::mean));
                 } else if s.transducer() {
-                    row.push(self.face(sim, particles, s, m)?);
+                    row.push(face(sim, particles, s, m.as_mut())?);
                 }
             }
         }
+        let frame = self.moving.then_some(pose);
         for g in &self.gauges {
-            row.push(self.gauge(sim, particles, g.x, pose)?);
+            row.push(gauges::elevation(sim, particles, g.x, frame)?);
         }
-        if self.params.front {
-            let front = x
-                .iter()
-                .filter(|q| q.0.y < ds)
-                .map(|q| q.0.x)
-                .fold(0.0, f64::max);
-            row.push(front + 0.5 * ds);
-        }
-        if self.params.column_height {
-            let height = x
-                .iter()
-                .filter(|q| q.0.x < ds)
-                .map(|q| q.0.y)
-                .fold(0.0, f64::max);
-            row.push(height + 0.5 * ds);
-        }
-        if self.params.density_fluctuation {
-            let rho = particles.fluid::<Density>()?;
-            let rho0 = sim.constants.eos.rho0;
-            // Without an integrator's flags, no guard has acted.
-            let flags = particles.fluid.get::<&Guarded>();
-            let untouched = |i: usize| flags.as_ref().is_none_or(|f| f[i].untouched());
-            let (mut flow, mut guarded, mut count) = (0.0_f64, 0.0_f64, 0usize);
-            for (i, r) in rho.iter().enumerate() {
-                let d = (r.0 / rho0 - 1.0).abs();
-                if untouched(i) {
-                    flow = flow.max(d);
-                } else {
-                    guarded = guarded.max(d);
-                    count += 1;
-                }
-            }
-            // floored, reflected: filled in by `run` from the diagnostics.
-            row.extend([flow, guarded, count as f64, 0.0, 0.0]);
-        }
-        if self.params.max_speed {
-            let v = particles.fluid::<Velocity>()?;
-            row.push(v.iter().map(|v| v.0.length()).fold(0.0, f64::max));
-        }
-        if self.params.neighbours {
-            let n = column::<NeighbourCount>(particles.fluid)?;
-            let min = n.iter().map(|c| c.0).min().unwrap_or(0) as f64;
-            let max = n.iter().map(|c| c.0).max().unwrap_or(0) as f64;
-            let mean = n.iter().map(|c| c.0 as f64).sum::<f64>() / n.len().max(1) as f64;
-            row.extend([min, mean, max]);
-        }
-        if self.params.roll_moment {
-            let (a, m) = (
-                particles.fluid::<Acceleration>()?,
-                particles.fluid::<Mass>()?,
-            );
-            row.push(pose.state.angle.to_degrees());
-            row.push(roll_moment(
-                &x,
-                &a,
-                &m,
-                pose.centre(),
-                sim.constants.gravity,
-            ));
-        }
-        if let Some(piston) = self.piston.filter(|_| self.params.piston) {
-            let wall = &wall_now(piston)?;
-            let rest = sim.world.get::<&Wall>(piston).map_or(wall.a.x, |w| w.a.x);
-            row.push(wall.a.x - rest);
-            // F = n_x * integral of p along the wetted paddle (midpoint rule, steps of
-            // about ds); dry points interpolate to 0.
-            let steps = (wall.length() / ds).ceil().max(1.0) as usize;
-            let step = wall.length() / steps as f64;
-            let mut force = 0.0;
-            for i in 0..steps {
-                let at = wall.point((i as f64 + 0.5) * step);
-                force += self.shepard(sim, particles, at)? * step;
-            }
-            row.push(force * -wall.normal().x);
-        }
+        let piston = self.piston.filter(|_| self.params.piston);
+        diagnostics::sample(&self.params, piston, sim, particles, pose, &mut row)?;
         Ok(row)
     }
 
-    /// Sensor `s`'s pressure by method `m` at `offset` along the wall from its centre.
-    fn reading(
-        &self,
-        sim: &Sim,
-        particles: Particles,
-        s: &PressureSensor,
-        m: Method,
-        offset: f64,
-    ) -> Result<f64, StepError> {
-        let wall = &*sim
-            .world
-            .get::<&WallPose>(s.wall)
-            .map_err(|_| StepError::Internal("a probed wall is not in the world".into()))?;
-        let (x, p) = (
-            particles.fluid::<Position>()?,
-            particles.fluid::<Pressure>()?,
-        );
-        let at = wall.point(s.along + offset);
-        let carry = Carry {
-            rho0: sim.constants.eos.rho0,
-            g: sim.constants.gravity - wall.body.acceleration_at(at),
-        };
-        Ok(match m {
-            Method::Shepard => self.shepard(sim, particles, at)?,
-            Method::Nearest => nearest(sim, &x, &p, at, carry),
-            Method::Averaged => {
-                let shifted = PressureSensor {
-                    along: s.along + offset,
-                    ..s.clone()
-                };
-                averaged(
-                    sim,
-                    &x,
-                    &p,
-                    wall,
-                    &shifted,
-                    carry,
-                    &mut self.scratch.borrow_mut(),
-                )
-            }
-        })
-    }
-
-    /// Sensor `s`'s pressure by method `m`, averaged over its face.
-    fn face(
-        &self,
-        sim: &Sim,
-        particles: Particles,
-        s: &PressureSensor,
-        m: Method,
-    ) -> Result<f64, StepError> {
-        let offsets = face_offsets(s.diameter, sim.constants.spacing);
-        let mut sum = 0.0;
-        for &o in &offsets {
-            sum += self.reading(sim, particles, s, m, o)?;
-        }
-        Ok(sum / offsets.len() as f64)
-    }
-
     /// The face readings of the sensors with a time filter, in the filters' order.
-    fn filtered_readings(&self, sim: &Sim) -> Result<Vec<f64>, StepError> {
+    fn filtered_readings(&mut self, sim: &Sim) -> Result<Vec<f64>, StepError> {
         let Some(particles) = Particles::of(&sim.world) else {
             return Ok(vec![0.0; self.filters.len()]);
         };
         let mut out = Vec::with_capacity(self.filters.len());
         for s in self.sensors.iter().filter(|s| s.filter > 0.0) {
-            for &m in &self.params.methods {
-                out.push(self.face(sim, particles, s, m)?);
+            for (_, m) in &mut self.methods {
+                out.push(face(sim, particles, s, m.as_mut())?);
             }
         }
         Ok(out)
     }
+}
 
-    /// Wave gauge at tank-frame abscissa `x`: the free surface is the lowest height y
-    /// above the bottom (in the tank frame, along the tank's vertical) where the
-    /// kernel-interpolated fluid fraction along the vertical line,
-    ///   phi(y) = sum_j (m_j / rho_j) W(|(x, y) - x_j|)   (fluid and ghosts),
-    /// falls below 1/2, marching up from half a spacing above the bottom in steps of
-    /// ds/4 and interpolating linearly between the last two points. It is the surface of
-    /// the water connected to the bottom: drops and spray above it do not count, a wet
-    /// patch at the gauge too thin to reach phi = 1/2 reads 0 (dry), and so does a
-    /// gauge with phi < 1/2 at its foot (docs/physics.md, "Other probes").
-    fn gauge(&self, sim: &Sim, particles: Particles, x: f64, pose: Pose) -> Result<f64, StepError> {
-        let Some(nb) = sim.resources.get::<Neighbours>() else {
-            return Ok(0.0);
-        };
-        let (xj, rho, m) = (
-            particles.joined::<Position>()?,
-            particles.joined::<Density>()?,
-            particles.joined::<Mass>()?,
-        );
-        let (xj, rho, m) = (xj.view(), rho.view(), m.view());
-        let c = &sim.constants;
-        let fraction = |y: f64| {
-            let at = if self.moving {
-                pose.to_world(DVec2::new(x, y))
-            } else {
-                DVec2::new(x, y)
-            };
-            let mut phi = 0.0;
-            nb.grid.for_each_near(at, |j| {
-                let w = kernel::w(c.kernel, c.h, (at - xj.get(j).0).length());
-                phi += m.get(j).0 / rho.get(j).0 * w;
-            });
-            phi
-        };
-        let (step, top) = (0.25 * c.spacing, (c.domain.1 - c.domain.0).length());
-        let mut y = 0.5 * c.spacing;
-        let mut phi = fraction(y);
-        // Dry, or a non-finite fraction (the guard stops such a run).
-        if phi.is_nan() || phi < 0.5 {
-            return Ok(0.0);
-        }
-        while y < top {
-            let (y1, phi1) = (y + step, fraction(y + step));
-            if phi1 < 0.5 {
-                return Ok(y + step * (phi - 0.5) / (phi - phi1));
-            }
-            (y, phi) = (y1, phi1);
-        }
-        Ok(y)
-    }
+/// Sensor `s`'s pressure by method `m` at `offset` along the wall from its centre.
+fn reading(
+    sim: &Sim,
+    particles: Particles,
+    s: &PressureSensor,
+    m: &mut dyn ExtractionMethod,
+    offset: f64,
+) -> Result<f64, StepError> {
+    let wall = &*sim
+        .world
+        .get::<&WallPose>(s.wall)
+        .map_err(|_| StepError::Internal("a probed wall is not in the world".into()))?;
+    let along = s.along + offset;
+    let at = wall.point(along);
+    let site = Site {
+        wall,
+        along,
+        width: s.width,
+        carry: Carry {
+            rho0: sim.constants.eos.rho0,
+            g: sim.constants.gravity - wall.body.acceleration_at(at),
+        },
+    };
+    m.pressure(sim, particles, &site)
+}
 
-    /// Method I: Shepard interpolation of fluid and ghost pressures at `at`.
-    fn shepard(&self, sim: &Sim, particles: Particles, at: DVec2) -> Result<f64, StepError> {
-        let Some(nb) = sim.resources.get::<Neighbours>() else {
-            return Ok(0.0);
-        };
-        let (x, p) = (
-            particles.joined::<Position>()?,
-            particles.joined::<Pressure>()?,
-        );
-        let (rho, m) = (particles.joined::<Density>()?, particles.joined::<Mass>()?);
-        let (x, p, rho, m) = (x.view(), p.view(), rho.view(), m.view());
-        let c = &sim.constants;
-        let (mut num, mut den) = (0.0, 0.0);
-        nb.grid.for_each_near(at, |j| {
-            let w = kernel::w(c.kernel, c.h, (at - x.get(j).0).length());
-            let vol = m.get(j).0 / rho.get(j).0;
-            num += p.get(j).0 * w * vol;
-            den += w * vol;
-        });
-        Ok(if den > 0.0 { num / den } else { 0.0 })
+/// Sensor `s`'s pressure by method `m`, averaged over its face.
+fn face(
+    sim: &Sim,
+    particles: Particles,
+    s: &PressureSensor,
+    m: &mut dyn ExtractionMethod,
+) -> Result<f64, StepError> {
+    let offsets = face_offsets(s.diameter, sim.constants.spacing);
+    let mut sum = 0.0;
+    for &o in &offsets {
+        sum += reading(sim, particles, s, m, o)?;
     }
+    Ok(sum / offsets.len() as f64)
 }

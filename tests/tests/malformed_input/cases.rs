@@ -490,6 +490,30 @@ pub fn cases() -> Vec<Case> {
             &["Integrate runs every step"],
         ),
         case(
+            "misspelt extraction method",
+            dam(
+                "methods: [Shepard, Nearest, Averaged]",
+                "methods: [Shepard, Nearest, Averagd]",
+            ),
+            LineOf("Averagd"),
+            Is("methods"),
+            &[
+                "unknown variant `Averagd`",
+                "`Averaged`, `Nearest`, `Shepard`",
+                "did you mean `Averaged`?",
+            ],
+        ),
+        case(
+            "extraction method named twice",
+            dam(
+                "methods: [Shepard, Nearest, Averaged]",
+                "methods: [Shepard, Nearest, Shepard]",
+            ),
+            LineOf("methods: [Shepard, Nearest, Shepard]"),
+            Is("methods"),
+            &["`Shepard` is listed twice; name each method once"],
+        ),
+        case(
             "two writers of the density rate",
             dam("        Forces(", "        Continuity(),\n        Forces("),
             LineOf("Forces(terms"),
