@@ -17,7 +17,9 @@ use crate::vocab::DensityGradient;
 use crate::vocab::GradientUnrenormalised;
 use rayon::prelude::*;
 use sph_core::components::Ghost;
-use sph_core::pair::{with_records, Columns, Field, Fields, Lane, Me, Pair, PairTerm, Pass, Scope};
+use sph_core::pair::{
+    with_records, Columns, Field, Fields, Lane, Layouts, Me, Pair, PairTerm, Pass, Scope,
+};
 use sph_core::sim::Counter;
 use sph_core::sim::Sim;
 use sph_core::stage::StepError;
@@ -34,6 +36,8 @@ pub struct Renormalised;
 const SINGULAR: f64 = 1e-3;
 
 impl PairTerm for Renormalised {
+    // Packed with (x, y, rho, m) by its stage.
+    const LAYOUTS: Layouts = Layouts::FILTER;
     type Acc<L: Lane> = [L; 5];
     /// The gradient, and whether the matrix was singular.
     type Out = (glam::DVec2, bool);

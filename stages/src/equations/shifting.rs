@@ -45,7 +45,7 @@ use serde::{Deserialize, Serialize};
 use sph_core::components::{Density, Fluid, Ghost, Mass, Position};
 use sph_core::contract::Access;
 use sph_core::kernel::Kernel;
-use sph_core::pair::{with_records, Field, Fields, Lane, Me, Pair, PairTerm, Pass};
+use sph_core::pair::{with_records, Field, Fields, Lane, Layouts, Me, Pair, PairTerm, Pass};
 use sph_core::sim::Counter;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
@@ -161,6 +161,8 @@ pub struct Concentration {
 const SINGULAR: f64 = 1e-3;
 
 impl PairTerm for Concentration {
+    // Packed with (x, y, rho, m) by its stage.
+    const LAYOUTS: Layouts = Layouts::FILTER;
     type Acc<L: Lane> = [L; 7];
     type Out = Sums;
     fn reads(&self) -> Fields {

@@ -6,7 +6,7 @@
 //! kappa_i = (rho*_i - rho_0) / dt^2 alpha_i / rho_i (the paper's alpha_i is ours
 //! divided by rho_i).
 
-use sph_core::pair::{Fields, Lane, Me, Pair, PairTerm};
+use sph_core::pair::{Fields, Lane, Layouts, Me, Pair, PairTerm};
 
 /// Summation density and the DFSPH factor of particle i, with W(0) for its own mass.
 #[derive(Clone, Copy, Debug)]
@@ -15,6 +15,8 @@ pub struct DensityFactor {
 }
 
 impl PairTerm for DensityFactor {
+    // The solve packs its records with (x, y, rho, m).
+    const LAYOUTS: Layouts = Layouts::FILTER;
     /// sum m W, sum m grad W (x, y), sum m^2 |grad W|^2.
     type Acc<L: Lane> = [L; 4];
     /// (rho_i, alpha_i).

@@ -11,7 +11,7 @@
 //! rest density keeps it, so spray does not carry the tension a continuity equation
 //! gives a particle that loses its neighbours.
 
-use sph_core::pair::{Field, Fields, Lane, Me, Pair, PairTerm};
+use sph_core::pair::{Field, Fields, Lane, Layouts, Me, Pair, PairTerm};
 
 /// The summed density, corrected where the kernel is cut by a free surface.
 #[derive(Clone, Copy, Debug)]
@@ -25,6 +25,8 @@ pub struct FreeSurfaceDensity {
 }
 
 impl PairTerm for FreeSurfaceDensity {
+    // Packed with (x, y, rho, m) by its stage.
+    const LAYOUTS: Layouts = Layouts::FILTER;
     /// sum m W.
     type Acc<L: Lane> = L;
     type Out = f64;

@@ -12,7 +12,7 @@
 //! Shepard value is used instead.
 
 use glam::DVec2;
-use sph_core::pair::{Field, Fields, Lane, Me, Pair, PairTerm};
+use sph_core::pair::{Field, Fields, Lane, Layouts, Me, Pair, PairTerm};
 
 /// Smallest accepted det(A) / (A_00 A_11 A_22): below it A is near singular.
 const MIN_CONDITION: f64 = 1e-3;
@@ -74,6 +74,8 @@ pub struct Mls {
 }
 
 impl PairTerm for Mls {
+    // Packed with (x, y, rho, m) by its stage.
+    const LAYOUTS: Layouts = Layouts::FILTER;
     /// The sums of [`MlsSums`] in lanes: A's upper triangle, sum m W, sum m W d.
     type Acc<L: Lane> = [L; 9];
     type Out = f64;

@@ -31,7 +31,7 @@ use crate::vocab::NoSlipVelocity;
 use serde::de::{self, DeserializeSeed, EnumAccess, VariantAccess, Visitor};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use sph_core::contract::Access;
-use sph_core::pair::{Fields, Lane, Me, Pair, PluginTerm, RateTerm, Rates};
+use sph_core::pair::{Fields, Lane, Layouts, Me, Pair, PluginTerm, RateTerm, Rates};
 use sph_core::registry::{Identifier, ParamError, SeqOf};
 use sph_core::sim::Constants;
 pub use sph_core::terms::{PrePass, Term, TermParams, TermRegistry};
@@ -254,6 +254,14 @@ macro_rules! rate_terms {
         impl<const SET: u16> RateTerm for Fixed<SET> {
             const USES_COEF: bool =
                 false $(|| (SET & (1 << TermBit::$ty as u16) != 0 && <$module::$ty as RateTerm>::USES_COEF))*;
+            // The records are packed with the set's reads: one layout at most (none
+            // when a viscous term also reads the ghosts' no-slip velocities).
+            const LAYOUTS: Layouts = Layouts::of(
+                Fields::of(&[]) $(.with(match SET & (1 << TermBit::$ty as u16) {
+                    0 => Fields::of(&[]),
+                    _ => <$module::$ty as Term>::READS,
+                }))*
+            );
             fn reads(&self) -> Fields {
                 let mut f = Fields::default();
                 $(if SET & (1 << TermBit::$ty as u16) != 0 {

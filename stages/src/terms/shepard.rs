@@ -1,7 +1,7 @@
 //! The Shepard filter's sums (docs/physics.md, "Density re-initialisation"):
 //!   rho_i = sum_j m_j W_ij / sum_j (m_j/rho_j) W_ij,   j over the neighbours and i.
 
-use sph_core::pair::{Field, Fields, Lane, Me, Pair, PairTerm};
+use sph_core::pair::{Field, Fields, Lane, Layouts, Me, Pair, PairTerm};
 
 /// The Shepard-filtered density, with W(0) for i's own contribution.
 #[derive(Clone, Copy, Debug)]
@@ -10,6 +10,8 @@ pub struct Shepard {
 }
 
 impl PairTerm for Shepard {
+    // Packed with (x, y, rho, m) by its stage.
+    const LAYOUTS: Layouts = Layouts::FILTER;
     /// sum m W and sum (m/rho) W.
     type Acc<L: Lane> = [L; 2];
     type Out = f64;

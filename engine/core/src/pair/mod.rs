@@ -49,6 +49,53 @@ pub use record::{Field, Fields, Records};
 
 use crate::kernel::Kernel;
 
+/// A set of the record layouts (field sets) that pair loops are compiled for with
+/// constant offsets: each costs a copy of a term's loop per kernel and instruction
+/// set, so a term names those its records can have ([`PairTerm::LAYOUTS`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Layouts(u8);
+
+impl Layouts {
+    /// No layout: the loop that finds the offsets at run time only.
+    pub const NONE: Layouts = Layouts(0);
+    /// The momentum equation's fields ([`Field::MOMENTUM`]): one 64-byte record.
+    pub const MOMENTUM: Layouts = Layouts(1);
+    /// The same with a vector column in slots 0 and 1 (the momentum pass with
+    /// delta-SPH's density gradient).
+    pub const GRADIENT: Layouts = Layouts(2);
+    /// The density filters' (x, y, rho, m).
+    pub const FILTER: Layouts = Layouts(4);
+    /// Every layout above.
+    pub const COMMON: Layouts = Layouts(7);
+
+    const MOMENTUM_BITS: u16 = Fields::of(&Field::MOMENTUM).bits();
+    const GRADIENT_BITS: u16 = Fields::of(&Field::MOMENTUM)
+        .with(Fields::of(&[Field::Slot0, Field::Slot1]))
+        .bits();
+    const FILTER_BITS: u16 = Fields::GEOMETRY.with(Fields::of(&[Field::Rho])).bits();
+
+    /// The layout of records packed with `reads` (and the geometry, always packed),
+    /// if it is one of the above; else [`Layouts::NONE`].
+    pub const fn of(reads: Fields) -> Layouts {
+        match reads.with(Fields::GEOMETRY).bits() {
+            Self::MOMENTUM_BITS => Self::MOMENTUM,
+            Self::GRADIENT_BITS => Self::GRADIENT,
+            Self::FILTER_BITS => Self::FILTER,
+            _ => Self::NONE,
+        }
+    }
+
+    /// Both sets.
+    pub const fn with(self, other: Layouts) -> Layouts {
+        Layouts(self.0 | other.0)
+    }
+
+    /// Whether this set holds every layout of `other`.
+    pub const fn has(self, other: Layouts) -> bool {
+        self.0 & other.0 == other.0
+    }
+}
+
 /// The instruction set a pass sums with. A value other than `Scalar` can only be made
 /// on a processor that has it, so the SIMD code it selects is sound to run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -186,6 +233,11 @@ impl<L: Lane> Pair<L> {
 /// Implementations are monomorphised per lane type and kernel: no dynamic dispatch
 /// per pair.
 pub trait PairTerm: Sync + Clone {
+    /// The record layouts its loop is compiled for with constant field offsets
+    /// ([`Layouts`]); records of any other layout are read with offsets found at run
+    /// time, at the same results. The default, every common layout, suits a term
+    /// whose records another stage may have packed with more fields than it reads.
+    const LAYOUTS: Layouts = Layouts::COMMON;
     /// The per-particle accumulator in lanes.
     type Acc<L: Lane>: Copy;
     /// The per-particle result.
@@ -213,6 +265,7 @@ pub struct Counted<T> {
 }
 
 impl<T: PairTerm> PairTerm for Counted<T> {
+    const LAYOUTS: Layouts = T::LAYOUTS;
     type Acc<L: Lane> = (T::Acc<L>, L);
     /// The term's result and the count.
     type Out = (T::Out, u32);
@@ -295,26 +348,24 @@ impl<'a, T: PairTerm, K: Kernel> Pass<'a, T, K> {
     /// If `i` or a neighbour index is beyond the records.
     #[inline]
     pub fn sum(&self, i: usize, neighbours: &[u32]) -> T::Out {
-        /// The shipped momentum pass's fields.
-        const ALL: u16 = Fields::of(&Field::MOMENTUM).bits();
-        /// The same with a vector column in slots 0 and 1 (the momentum pass with
-        /// delta-SPH's density gradient).
-        const GRAD: u16 = Fields::of(&Field::MOMENTUM)
-            .with(Fields::of(&[Field::Slot0, Field::Slot1]))
-            .bits();
-        /// The Shepard and MLS filters' (x, y, rho, m).
-        const FILTER: u16 = Fields::GEOMETRY.with(Fields::of(&[Field::Rho])).bits();
-        // The common field sets get a loop compiled for them (known offsets, no test
-        // per field); any other set is read with offsets found at run time.
+        // The layouts `T` is compiled for (`PairTerm::LAYOUTS`) get a loop with known
+        // offsets and no test per field; any other is read with offsets found at run
+        // time. The tests are on constants, so a layout a term is not compiled for
+        // costs no code.
         macro_rules! on {
-            ($f:ident) => {
-                match self.records.fields().bits() {
-                    ALL => $f::<T, K, ALL>(self, i, neighbours),
-                    GRAD => $f::<T, K, GRAD>(self, i, neighbours),
-                    FILTER => $f::<T, K, FILTER>(self, i, neighbours),
-                    _ => $f::<T, K, 0>(self, i, neighbours),
+            ($f:ident) => {{
+                let bits = self.records.fields().bits();
+                if const { T::LAYOUTS.has(Layouts::MOMENTUM) } && bits == Layouts::MOMENTUM_BITS {
+                    return $f::<T, K, { Layouts::MOMENTUM_BITS }>(self, i, neighbours);
                 }
-            };
+                if const { T::LAYOUTS.has(Layouts::GRADIENT) } && bits == Layouts::GRADIENT_BITS {
+                    return $f::<T, K, { Layouts::GRADIENT_BITS }>(self, i, neighbours);
+                }
+                if const { T::LAYOUTS.has(Layouts::FILTER) } && bits == Layouts::FILTER_BITS {
+                    return $f::<T, K, { Layouts::FILTER_BITS }>(self, i, neighbours);
+                }
+                $f::<T, K, 0>(self, i, neighbours)
+            }};
         }
         // SAFETY: f64 needs no instructions beyond the baseline; an `Isa` of a SIMD
         // kind exists only where the processor has it.

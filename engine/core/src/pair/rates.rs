@@ -2,7 +2,7 @@
 //! dv_i/dt, d rho_i/dt and the dissipation rate, and the terms a scenario names run in
 //! one neighbour loop ([`EquationsOfMotion`]).
 
-use super::{Field, Fields, Lane, Me, Pair, PairTerm};
+use super::{Field, Fields, Lane, Layouts, Me, Pair, PairTerm};
 use glam::DVec2;
 
 /// One particle's rates in lanes, summed over its neighbours.
@@ -33,6 +33,9 @@ pub trait RateTerm: Sync {
     /// Whether the term adds to [`Rates::coef`] (known at compile time, so a loop
     /// without such terms does not multiply it out).
     const USES_COEF: bool = false;
+    /// The record layouts the loop of this term (or set) is compiled for
+    /// ([`PairTerm::LAYOUTS`]).
+    const LAYOUTS: Layouts = Layouts::COMMON;
     /// Adds this term's contribution of one group of neighbours.
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>);
 }
@@ -71,6 +74,7 @@ impl std::ops::Add for RateSums {
 pub struct EquationsOfMotion<R: RateTerm>(pub R);
 
 impl<R: RateTerm + Clone> PairTerm for EquationsOfMotion<R> {
+    const LAYOUTS: Layouts = R::LAYOUTS;
     type Acc<L: Lane> = Rates<L>;
     type Out = RateSums;
 
