@@ -1,10 +1,14 @@
 //! 2D smoothing kernels (docs/physics.md, "Kernels").
 //!
-//! Each kernel is a small `Copy` value built once per run from the smoothing length
-//! `h`, holding its normalisation, so the hot loops are monomorphised over the kernel
-//! type through [`with_kernel!`](crate::with_kernel) instead of branching per pair.
-//! Its shape is written once over [`Lane`]: the scalar path evaluates it on `f64`,
-//! the SIMD pair sums eight neighbours at a time (`crate::pair`).
+//! Each kernel's shape is written once over [`Lane`], as a [`KernelShape`]: the scalar
+//! path evaluates it on `f64`, the SIMD pair sums eight neighbours at a time
+//! (`crate::pair`). A kernel for one smoothing length is a small `Copy` value built
+//! once per pass from `h`, holding its normalisation. The hot loops are compiled
+//! twice through [`with_kernel!`](crate::with_kernel) instead of branching per pair:
+//! for the Wendland kernel ([`Native`], its shape inlined) and for [`DynKernel`], the
+//! same arithmetic around a shape chosen at run time, which runs the other shipped
+//! kernels (their shapes inlined behind a branch) and plugin kernels (their shape
+//! functions called through pointers).
 
 use crate::pair::lane::{whole_pow, Lane};
 use serde::{Deserialize, Serialize};
@@ -86,6 +90,22 @@ impl KernelKind {
             KernelKind::Plugin(p) => p.name,
         }
     }
+    /// The kernel as a [`DynKernel`] runs it: how the passes run every kernel but
+    /// [`KernelKind::Wendland`] (`with_kernel!`). A shipped shape is inlined behind a
+    /// branch, a plugin's called through pointers.
+    pub fn dynamic(self) -> PluginKernel {
+        let name = self.name();
+        let (kernel, inline) = match self {
+            KernelKind::Gaussian => (PluginKernel::new::<GaussianShape>(name), Inline::Gaussian),
+            KernelKind::Quadratic => (PluginKernel::new::<QuadraticShape>(name), Inline::Quadratic),
+            KernelKind::Cubic => (PluginKernel::new::<CubicShape>(name), Inline::Cubic),
+            KernelKind::Quartic => (PluginKernel::new::<QuarticShape>(name), Inline::Quartic),
+            // Through pointers, as a plugin's (the tests compare it with the native one).
+            KernelKind::Wendland => (PluginKernel::new::<WendlandShape>(name), Inline::No),
+            KernelKind::Plugin(p) => return p,
+        };
+        PluginKernel { inline, ..kernel }
+    }
     /// The shipped kernel named `name`.
     pub fn shipped(name: &str) -> Option<KernelKind> {
         KernelKind::ALL.into_iter().find(|k| k.name() == name)
@@ -123,9 +143,10 @@ impl<'de> Deserialize<'de> for KernelKind {
     }
 }
 
-/// A kernel's shape as a plugin writes it, once over [`Lane`]: W(r, h) = NORM / h^2
-/// w(q) with q = r/h, zero from q = SUPPORT on. `dw` is dw/dq and `dw_over_q` is
-/// (dw/dq)/q, in closed form (finite at q = 0), as for the shipped kernels.
+/// A kernel's shape, once over [`Lane`], as the shipped kernels and plugins write it:
+/// W(r, h) = NORM / h^2 w(q) with q = r/h, zero from q = SUPPORT on. `dw` is dw/dq and
+/// `dw_over_q` is (dw/dq)/q, in closed form (finite at q = 0, but for the quadratic,
+/// whose gradient does not vanish there; the kernel zeroes it at r = 0).
 pub trait KernelShape: Send + Sync + 'static {
     /// The 2D normalisation: W integrates to 1 over the plane.
     const NORM: f64;
@@ -136,17 +157,32 @@ pub trait KernelShape: Send + Sync + 'static {
     fn dw_over_q<L: Lane>(q: L) -> L;
 }
 
-/// A registered plugin kernel: its name, support and shape functions. Built once
-/// per process by the registry; a pass gets the kernel for one smoothing length
-/// with [`PluginKernel::at`].
+/// A kernel's name, support and shape: a plugin's (built once per process by the
+/// registry), whose shape functions are called through pointers, or a shipped
+/// kernel's ([`KernelKind::dynamic`]), whose shape is inlined behind a branch. A pass
+/// gets the kernel for one smoothing length with [`PluginKernel::at`].
 #[derive(Clone, Copy)]
 pub struct PluginKernel {
     name: &'static str,
     support: f64,
     norm: f64,
+    inline: Inline,
     w: crate::pair::ShapeFn,
     dw: crate::pair::ShapeFn,
     dw_over_q: crate::pair::ShapeFn,
+}
+
+/// The shipped shape a [`DynKernel`] evaluates inline, or `No` for the shape's
+/// functions through pointers. The branch on it goes the same way for a whole pass,
+/// so it costs next to nothing, where a call per group of lanes costs the pair loop
+/// its registers (29 % of the cubic kernel's AVX-512 speed; docs/performance.md).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Inline {
+    No,
+    Gaussian,
+    Quadratic,
+    Cubic,
+    Quartic,
 }
 
 impl std::fmt::Debug for PluginKernel {
@@ -164,6 +200,7 @@ impl PluginKernel {
             name,
             support: K::SUPPORT,
             norm: K::NORM,
+            inline: Inline::No,
             w: crate::pair::shape_fn::<K, 0>(),
             dw: crate::pair::shape_fn::<K, 1>(),
             dw_over_q: crate::pair::shape_fn::<K, 2>(),
@@ -174,34 +211,124 @@ impl PluginKernel {
     }
     /// The kernel for smoothing length `h`.
     pub fn at(&self, h: f64) -> DynKernel {
-        let (inv_h, norm) = (1.0 / h, self.norm / (h * h));
-        DynKernel {
-            inv_h,
-            norm,
-            norm_dw: norm * inv_h,
-            norm_grad: norm * inv_h * inv_h,
-            support_q: self.support,
-            support: self.support * h,
-            shape: *self,
+        Scaled::with(*self, h)
+    }
+}
+
+/// Where a kernel for one smoothing length ([`Scaled`]) gets its shape: compiled in
+/// ([`Static`]) or chosen at run time ([`PluginKernel`]).
+pub trait ShapeSource: Copy + std::fmt::Debug + Send + Sync + 'static {
+    /// [`KernelShape::NORM`].
+    fn norm(&self) -> f64;
+    /// [`KernelShape::SUPPORT`].
+    fn support(&self) -> f64;
+    /// Shape function `F` (0 w, 1 dw/dq, 2 (dw/dq)/q) at `q`.
+    fn shape<const F: u8, L: Lane>(&self, q: L) -> L;
+}
+
+/// Shape `S`, compiled in.
+pub struct Static<S>(std::marker::PhantomData<fn() -> S>);
+
+impl<S> Clone for Static<S> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<S> Copy for Static<S> {}
+
+impl<S> std::fmt::Debug for Static<S> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(std::any::type_name::<S>())
+    }
+}
+
+impl<S: KernelShape> ShapeSource for Static<S> {
+    #[inline(always)]
+    fn norm(&self) -> f64 {
+        S::NORM
+    }
+    #[inline(always)]
+    fn support(&self) -> f64 {
+        S::SUPPORT
+    }
+    #[inline(always)]
+    fn shape<const F: u8, L: Lane>(&self, q: L) -> L {
+        crate::pair::shape::<S, F, L>(q)
+    }
+}
+
+impl ShapeSource for PluginKernel {
+    #[inline(always)]
+    fn norm(&self) -> f64 {
+        self.norm
+    }
+    #[inline(always)]
+    fn support(&self) -> f64 {
+        self.support
+    }
+    #[inline(always)]
+    fn shape<const F: u8, L: Lane>(&self, q: L) -> L {
+        use crate::pair::shape;
+        match self.inline {
+            Inline::Gaussian => shape::<GaussianShape, F, L>(q),
+            Inline::Quadratic => shape::<QuadraticShape, F, L>(q),
+            Inline::Cubic => shape::<CubicShape, F, L>(q),
+            Inline::Quartic => shape::<QuarticShape, F, L>(q),
+            Inline::No => L::shape([&self.w, &self.dw, &self.dw_over_q][F as usize], q),
         }
     }
 }
 
-/// A plugin kernel for one smoothing length: the same arithmetic as a shipped
-/// kernel's around the plugin's shape, which is one indirect call per evaluation
-/// and group of lanes.
+/// A kernel for one smoothing length around the shape of `E`: W = norm w(q) with
+/// norm = NORM / h^2, dW/dr = norm/h dw/dq, (dW/dr)/r = norm/h^2 (dw/dq)/q, the same
+/// arithmetic whether the shape is compiled in ([`Native`]) or chosen at run time
+/// ([`DynKernel`]).
 #[derive(Clone, Copy, Debug)]
-pub struct DynKernel {
+pub struct Scaled<E> {
     inv_h: f64,
+    /// Normalisation divided by h^2 (W = norm w(q)).
     norm: f64,
+    /// norm / h, for dW/dr = norm/h dw/dq.
     norm_dw: f64,
+    /// norm / h^2, for (dW/dr)/r = norm/h^2 (dw/dq)/q, since r = q h.
     norm_grad: f64,
-    support_q: f64,
     support: f64,
-    shape: PluginKernel,
+    shape: E,
 }
 
-impl Kernel for DynKernel {
+/// A kernel compiled around its shape `S` (inlined in every loop that uses it).
+pub type Native<S> = Scaled<Static<S>>;
+
+/// A [`PluginKernel`] for one smoothing length: one indirect call per evaluation and
+/// group of lanes for a plugin's shape, a branch for a shipped one's.
+pub type DynKernel = Scaled<PluginKernel>;
+
+impl<E: ShapeSource> Scaled<E> {
+    /// The kernel of `shape` for smoothing length `h`.
+    pub fn with(shape: E, h: f64) -> Self {
+        let (inv_h, norm) = (1.0 / h, shape.norm() / (h * h));
+        Self {
+            inv_h,
+            norm,
+            norm_dw: norm * inv_h,
+            norm_grad: norm * inv_h * inv_h,
+            support: shape.support() * h,
+            shape,
+        }
+    }
+    /// The normalisation divided by h^2 (W = norm w(q)).
+    pub fn norm(&self) -> f64 {
+        self.norm
+    }
+}
+
+impl<S: KernelShape> Native<S> {
+    pub fn new(h: f64) -> Self {
+        Self::with(Static(std::marker::PhantomData), h)
+    }
+}
+
+impl<E: ShapeSource> Kernel for Scaled<E> {
     #[inline(always)]
     fn support(&self) -> f64 {
         self.support
@@ -212,176 +339,186 @@ impl Kernel for DynKernel {
     }
     #[inline(always)]
     fn w_at<L: Lane>(&self, q: L) -> L {
-        (L::splat(self.norm) * L::shape(&self.shape.w, q)).keep(q.lt(L::splat(self.support_q)))
+        let within = q.lt(L::splat(self.shape.support()));
+        (L::splat(self.norm) * self.shape.shape::<0, L>(q)).keep(within)
     }
     #[inline(always)]
     fn dw_dr_at<L: Lane>(&self, q: L) -> L {
-        (L::splat(self.norm_dw) * L::shape(&self.shape.dw, q)).keep(q.lt(L::splat(self.support_q)))
+        let within = q.lt(L::splat(self.shape.support()));
+        (L::splat(self.norm_dw) * self.shape.shape::<1, L>(q)).keep(within)
     }
     #[inline(always)]
     fn grad_factor_at<L: Lane>(&self, q: L, r: L) -> L {
-        let inside = L::and(q.lt(L::splat(self.support_q)), L::zero().lt(r));
-        (L::splat(self.norm_grad) * L::shape(&self.shape.dw_over_q, q)).keep(inside)
+        let inside = L::and(q.lt(L::splat(self.shape.support())), L::zero().lt(r));
+        (L::splat(self.norm_grad) * self.shape.shape::<2, L>(q)).keep(inside)
     }
 }
 
-/// A kernel type for one smoothing length: its normalisation and its shape functions
-/// of q = r/h, each an expression over the lane type with constants written `c(x)`:
-/// `w` the shape of W, `dw` of dW/dq, `dw_over_q` of (dW/dq)/q.
-macro_rules! kernel_type {
-    ($name:ident, $norm:expr, $support:expr,
-     |$q:ident, $c:ident| w = $w:expr, dw = $dw:expr, dw_over_q = $f:expr) => {
-        #[doc = concat!("The ", stringify!($name), " kernel for one smoothing length.")]
-        #[derive(Clone, Copy, Debug)]
-        pub struct $name {
-            inv_h: f64,
-            /// Normalisation divided by h^2 (W = norm w(q)).
-            norm: f64,
-            /// norm / h, for dW/dr = norm/h dw/dq.
-            norm_dw: f64,
-            /// norm / h^2, for (dW/dr)/r = norm/h^2 (dw/dq)/q, since r = q h.
-            norm_grad: f64,
-            support: f64,
-        }
-        impl $name {
-            pub fn new(h: f64) -> Self {
-                let (inv_h, norm) = (1.0 / h, $norm / (h * h));
-                Self {
-                    inv_h,
-                    norm,
-                    norm_dw: norm * inv_h,
-                    norm_grad: norm * inv_h * inv_h,
-                    support: $support * h,
-                }
-            }
-            /// The normalisation divided by h^2 (W = norm w(q)).
-            pub fn norm(&self) -> f64 {
-                self.norm
-            }
-        }
-        impl Kernel for $name {
-            #[inline(always)]
-            fn support(&self) -> f64 {
-                self.support
-            }
-            #[inline(always)]
-            fn inv_h(&self) -> f64 {
-                self.inv_h
-            }
-            #[inline(always)]
-            fn w_at<L: Lane>(&self, $q: L) -> L {
-                let $c = L::splat;
-                ($c(self.norm) * $w).keep($q.lt($c($support)))
-            }
-            #[inline(always)]
-            fn dw_dr_at<L: Lane>(&self, $q: L) -> L {
-                let $c = L::splat;
-                ($c(self.norm_dw) * $dw).keep($q.lt($c($support)))
-            }
-            #[inline(always)]
-            fn grad_factor_at<L: Lane>(&self, $q: L, r: L) -> L {
-                let $c = L::splat;
-                let inside = L::and($q.lt($c($support)), L::zero().lt(r));
-                ($c(self.norm_grad) * $f).keep(inside)
-            }
-        }
-    };
+/// The Gaussian's shape, truncated at q = 3: W = 1/(pi h^2) exp(-q^2)
+/// (docs/physics.md, "Kernels").
+#[derive(Clone, Copy, Debug)]
+pub struct GaussianShape;
+
+impl KernelShape for GaussianShape {
+    const NORM: f64 = 1.0 / PI;
+    const SUPPORT: f64 = 3.0;
+    #[inline(always)]
+    fn w<L: Lane>(q: L) -> L {
+        (-q * q).exp()
+    }
+    #[inline(always)]
+    fn dw<L: Lane>(q: L) -> L {
+        L::splat(-2.0) * q * (-q * q).exp()
+    }
+    #[inline(always)]
+    fn dw_over_q<L: Lane>(q: L) -> L {
+        L::splat(-2.0) * (-q * q).exp()
+    }
 }
 
-kernel_type!(
-    Gaussian,
-    1.0 / PI,
-    3.0,
-    |q, c| w = (-q * q).exp(),
-    dw = c(-2.0) * q * (-q * q).exp(),
-    dw_over_q = c(-2.0) * (-q * q).exp()
-);
-kernel_type!(
-    Quadratic,
-    2.0 / PI,
-    2.0,
-    |q, c| w = c(0.1875) * q * q - c(0.75) * q + c(0.75),
-    dw = c(0.375) * q - c(0.75),
-    dw_over_q = c(0.375) - c(0.75) / q
-);
-kernel_type!(
-    Cubic,
-    15.0 / (7.0 * PI),
-    2.0,
-    |q, c| w = {
+/// Johnson & Beissel's (1996) quadratic: W = 2/(pi h^2) (3/16 q^2 - 3/4 q + 3/4),
+/// q <= 2 (docs/physics.md, "Kernels").
+#[derive(Clone, Copy, Debug)]
+pub struct QuadraticShape;
+
+impl KernelShape for QuadraticShape {
+    const NORM: f64 = 2.0 / PI;
+    const SUPPORT: f64 = 2.0;
+    #[inline(always)]
+    fn w<L: Lane>(q: L) -> L {
+        let c = L::splat;
+        c(0.1875) * q * q - c(0.75) * q + c(0.75)
+    }
+    #[inline(always)]
+    fn dw<L: Lane>(q: L) -> L {
+        let c = L::splat;
+        c(0.375) * q - c(0.75)
+    }
+    /// 3/8 - 3/4 / q: unbounded at q = 0, where the caller's mask zeroes it.
+    #[inline(always)]
+    fn dw_over_q<L: Lane>(q: L) -> L {
+        let c = L::splat;
+        c(0.375) - c(0.75) / q
+    }
+}
+
+/// Monaghan & Lattanzio's (1985) cubic B-spline: W = 15/(7 pi h^2) (2/3 - q^2 + q^3/2)
+/// for q < 1, 15/(7 pi h^2) (2 - q)^3/6 for 1 <= q < 2 (docs/physics.md, "Kernels").
+#[derive(Clone, Copy, Debug)]
+pub struct CubicShape;
+
+impl KernelShape for CubicShape {
+    const NORM: f64 = 15.0 / (7.0 * PI);
+    const SUPPORT: f64 = 2.0;
+    #[inline(always)]
+    fn w<L: Lane>(q: L) -> L {
+        let c = L::splat;
         let t = c(2.0) - q;
         L::select(
             q.lt(c(1.0)),
             c(2.0 / 3.0) - q * q + c(0.5) * q * q * q,
             t * t * t / c(6.0),
         )
-    },
-    dw = {
+    }
+    #[inline(always)]
+    fn dw<L: Lane>(q: L) -> L {
+        let c = L::splat;
         let t = c(2.0) - q;
         L::select(
             q.lt(c(1.0)),
             c(-2.0) * q + c(1.5) * q * q,
             c(-0.5) * (t * t),
         )
-    },
-    dw_over_q = {
+    }
+    #[inline(always)]
+    fn dw_over_q<L: Lane>(q: L) -> L {
+        let c = L::splat;
         let t = c(2.0) - q;
         L::select(q.lt(c(1.0)), c(-2.0) + c(1.5) * q, c(-0.5) * (t * t) / q)
     }
-);
-kernel_type!(
-    Quartic,
-    15.0 / (7.0 * PI),
-    2.0,
-    |q, c| w = c(2.0 / 3.0) - c(9.0 / 8.0) * q * q + c(19.0 / 24.0) * q * q * q
-        - c(5.0 / 32.0) * whole_pow(q, 4),
-    dw = c(-9.0 / 4.0) * q + c(19.0 / 8.0) * q * q - c(5.0 / 8.0) * q * q * q,
-    dw_over_q = c(-9.0 / 4.0) + c(19.0 / 8.0) * q - c(5.0 / 8.0) * q * q
-);
-kernel_type!(
-    Wendland,
-    7.0 / (4.0 * PI),
-    2.0,
-    |q, c| w = whole_pow(c(1.0) - c(0.5) * q, 4) * (c(2.0) * q + c(1.0)),
-    dw = {
+}
+
+/// Liu, Liu & Lam's (2003) quartic: W = 15/(7 pi h^2) (2/3 - 9/8 q^2 + 19/24 q^3
+/// - 5/32 q^4), q < 2 (docs/physics.md, "Kernels").
+#[derive(Clone, Copy, Debug)]
+pub struct QuarticShape;
+
+impl KernelShape for QuarticShape {
+    const NORM: f64 = 15.0 / (7.0 * PI);
+    const SUPPORT: f64 = 2.0;
+    #[inline(always)]
+    fn w<L: Lane>(q: L) -> L {
+        let c = L::splat;
+        c(2.0 / 3.0) - c(9.0 / 8.0) * q * q + c(19.0 / 24.0) * q * q * q
+            - c(5.0 / 32.0) * whole_pow(q, 4)
+    }
+    #[inline(always)]
+    fn dw<L: Lane>(q: L) -> L {
+        let c = L::splat;
+        c(-9.0 / 4.0) * q + c(19.0 / 8.0) * q * q - c(5.0 / 8.0) * q * q * q
+    }
+    #[inline(always)]
+    fn dw_over_q<L: Lane>(q: L) -> L {
+        let c = L::splat;
+        c(-9.0 / 4.0) + c(19.0 / 8.0) * q - c(5.0 / 8.0) * q * q
+    }
+}
+
+/// Wendland's (1995) C2 kernel: W = 7/(4 pi h^2) (1 - q/2)^4 (2q + 1), q <= 2
+/// (docs/physics.md, "Kernels").
+#[derive(Clone, Copy, Debug)]
+pub struct WendlandShape;
+
+impl KernelShape for WendlandShape {
+    const NORM: f64 = 7.0 / (4.0 * PI);
+    const SUPPORT: f64 = 2.0;
+    #[inline(always)]
+    fn w<L: Lane>(q: L) -> L {
+        let c = L::splat;
+        whole_pow(c(1.0) - c(0.5) * q, 4) * (c(2.0) * q + c(1.0))
+    }
+    #[inline(always)]
+    fn dw<L: Lane>(q: L) -> L {
+        let c = L::splat;
         let t = c(1.0) - c(0.5) * q;
         c(-5.0) * q * (t * t * t)
-    },
-    dw_over_q = {
+    }
+    #[inline(always)]
+    fn dw_over_q<L: Lane>(q: L) -> L {
+        let c = L::splat;
         let t = c(1.0) - c(0.5) * q;
         c(-5.0) * (t * t * t)
     }
-);
+}
 
-/// Runs `$body` with `$k` bound to the concrete kernel of `$kind` for smoothing length
-/// `$h`, so the body is compiled once per kernel type.
+/// The Gaussian kernel for one smoothing length, compiled natively (the passes run it
+/// as a [`DynKernel`]; see [`with_kernel!`](crate::with_kernel)).
+pub type Gaussian = Native<GaussianShape>;
+/// The quadratic kernel for one smoothing length, compiled natively.
+pub type Quadratic = Native<QuadraticShape>;
+/// The cubic B-spline for one smoothing length, compiled natively.
+pub type Cubic = Native<CubicShape>;
+/// The quartic kernel for one smoothing length, compiled natively.
+pub type Quartic = Native<QuarticShape>;
+/// The Wendland C2 kernel for one smoothing length, compiled natively: the one kernel
+/// the passes are compiled for.
+pub type Wendland = Native<WendlandShape>;
+
+/// Runs `$body` with `$k` bound to the kernel of `$kind` for smoothing length `$h`.
+/// The body is compiled twice: for [`Wendland`], the shipped scenarios' kernel, with
+/// its shape inlined, and for [`DynKernel`], which serves the other shipped kernels
+/// (their shapes inlined behind a branch) and plugin kernels (their shape functions
+/// compiled per lane type, one indirect call per evaluation and group of lanes).
 #[macro_export]
 macro_rules! with_kernel {
     ($kind:expr, $h:expr, |$k:ident| $body:expr) => {{
-        use $crate::kernel::{Cubic, Gaussian, KernelKind, Quadratic, Quartic, Wendland};
         match $kind {
-            KernelKind::Gaussian => {
-                let $k = Gaussian::new($h);
+            $crate::kernel::KernelKind::Wendland => {
+                let $k = $crate::kernel::Wendland::new($h);
                 $body
             }
-            KernelKind::Quadratic => {
-                let $k = Quadratic::new($h);
-                $body
-            }
-            KernelKind::Cubic => {
-                let $k = Cubic::new($h);
-                $body
-            }
-            KernelKind::Quartic => {
-                let $k = Quartic::new($h);
-                $body
-            }
-            KernelKind::Wendland => {
-                let $k = Wendland::new($h);
-                $body
-            }
-            KernelKind::Plugin(p) => {
-                let $k = p.at($h);
+            kind => {
+                let $k = kind.dynamic().at($h);
                 $body
             }
         }
@@ -482,6 +619,37 @@ mod tests {
                 "{h} {ds}"
             );
         }
+    }
+
+    /// Each shipped kernel as the passes run it but the Wendland (`DynKernel`, the
+    /// shape inlined behind a branch) and through its shape's pointers (as a plugin's)
+    /// is the kernel compiled in (`Native`), bit for bit, in W, dW/dr and (dW/dr)/r,
+    /// within the support, at its edge and beyond.
+    #[test]
+    fn a_dynamic_kernel_is_the_compiled_kernel_bit_for_bit() {
+        fn check<S: KernelShape>(kind: KernelKind) {
+            let native = Native::<S>::new(0.02);
+            let dynamic = kind.dynamic().at(0.02);
+            let pointers = PluginKernel::new::<S>("Shape").at(0.02);
+            assert_eq!(native.support(), dynamic.support(), "{kind:?}");
+            for step in 0..=700 {
+                let r = native.support() * step as f64 / 600.0;
+                for k in [dynamic, pointers] {
+                    for (a, b) in [
+                        (native.w(r), k.w(r)),
+                        (native.dw_dr(r), k.dw_dr(r)),
+                        (native.grad_factor(r), k.grad_factor(r)),
+                    ] {
+                        assert_eq!(a.to_bits(), b.to_bits(), "{kind:?} r = {r}: {a} vs {b}");
+                    }
+                }
+            }
+        }
+        check::<GaussianShape>(KernelKind::Gaussian);
+        check::<QuadraticShape>(KernelKind::Quadratic);
+        check::<CubicShape>(KernelKind::Cubic);
+        check::<QuarticShape>(KernelKind::Quartic);
+        check::<WendlandShape>(KernelKind::Wendland);
     }
 
     #[test]

@@ -42,7 +42,7 @@ mod x86;
 
 pub use columns::{ColumnError, ColumnKey, Columns, Scope};
 pub use lane::{whole_pow, Lane};
-pub(crate) use plugin::shape_fn;
+pub(crate) use plugin::{shape, shape_fn};
 pub use plugin::{NoTerms, PluginTerm, ShapeFn, WithPlugins};
 pub use rates::{EquationsOfMotion, RateSums, RateTerm, Rates};
 pub use record::{Field, Fields, Records};

@@ -159,7 +159,7 @@ pub(crate) fn shape_fn<K: crate::kernel::KernelShape, const F: u8>() -> ShapeFn 
 
 /// Shape function `F` of `K` at `q`.
 #[inline(always)]
-pub(super) fn shape<K: crate::kernel::KernelShape, const F: u8, L: Lane>(q: L) -> L {
+pub(crate) fn shape<K: crate::kernel::KernelShape, const F: u8, L: Lane>(q: L) -> L {
     match F {
         0 => K::w(q),
         1 => K::dw(q),

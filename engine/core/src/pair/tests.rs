@@ -190,6 +190,46 @@ fn kernels_in_lanes_match_the_scalar_kernels() {
     }
 }
 
+/// Every shipped kernel as the passes run it but the Wendland
+/// ([`crate::kernel::DynKernel`], the shape inlined behind a branch) and through its
+/// shape's pointers (as a plugin's) sums the same as compiled in, bit for bit, on
+/// every path: the same operations in the same order.
+#[test]
+fn dynamic_kernels_sum_as_compiled_ones_bit_for_bit() {
+    use crate::kernel::{
+        CubicShape, GaussianShape, KernelShape, Native, PluginKernel, QuadraticShape, QuarticShape,
+        WendlandShape,
+    };
+    fn check<S: KernelShape>(kind: KernelKind) {
+        let h = 0.013;
+        let native = Native::<S>::new(h);
+        let (dynamic, pointers) = (kind.dynamic().at(h), PluginKernel::new::<S>("S").at(h));
+        let w = world(5);
+        let r = packed(&w, Probe.reads());
+        let mut isas = Isa::available();
+        isas.push(Isa::SCALAR);
+        for isa in isas {
+            for i in [31, 40, 58] {
+                let js = neighbours(&r, i, 0.5 * kind.support_factor() * h);
+                let a = Pass::with_isa(&Probe, native, &r, isa).unwrap().sum(i, &js);
+                let b = Pass::with_isa(&Probe, dynamic, &r, isa)
+                    .unwrap()
+                    .sum(i, &js);
+                let c = Pass::with_isa(&Probe, pointers, &r, isa)
+                    .unwrap()
+                    .sum(i, &js);
+                assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits), "{kind:?} {isa:?}");
+                assert_eq!(a.map(f64::to_bits), c.map(f64::to_bits), "{kind:?} {isa:?}");
+            }
+        }
+    }
+    check::<GaussianShape>(KernelKind::Gaussian);
+    check::<QuadraticShape>(KernelKind::Quadratic);
+    check::<CubicShape>(KernelKind::Cubic);
+    check::<QuarticShape>(KernelKind::Quartic);
+    check::<WendlandShape>(KernelKind::Wendland);
+}
+
 /// A neighbour index beyond the records panics on every path (before any read).
 #[test]
 fn an_index_beyond_the_records_panics() {
