@@ -80,48 +80,49 @@ pub(crate) fn run(
         set
     }
     use TermBit::*;
-    // The shipped scenarios' sets get loops compiled for them.
-    const SPLASH: u16 = bits(&[
+    // The sets the shipped scenarios and studies run get loops compiled for them,
+    // named by their terms: the pressure gradient (PG) with Monaghan's artificial
+    // viscosity (AV) [and artificial pressure (AP)], continuity (C) and each density
+    // diffusion (MC Molteni-Colagrossi, F Fourtakas, D delta-SPH); the Riemann set.
+    const PG_AV_AP_C: u16 = bits(&[
         PressureGradient,
         ArtificialViscosity,
         ArtificialPressure,
         Continuity,
     ]);
-    const WAVES: u16 = bits(&[PressureGradient, ArtificialViscosity, Continuity]);
-    const PLAIN: u16 = bits(&[PressureGradient, ArtificialViscosity]);
-    const DENSITY: u16 = bits(&[Continuity]);
-    // With each density diffusion (one bit more).
-    const SPLASH_MC: u16 = SPLASH | bits(&[MolteniColagrossi]);
-    const SPLASH_F: u16 = SPLASH | bits(&[Fourtakas]);
-    const WAVES_MC: u16 = WAVES | bits(&[MolteniColagrossi]);
-    const WAVES_F: u16 = WAVES | bits(&[Fourtakas]);
-    const SPLASH_D: u16 = SPLASH | bits(&[DeltaSph]);
-    const WAVES_D: u16 = WAVES | bits(&[DeltaSph]);
-    // Riemann-solver SPH (the dam break's and the sloshing tank's).
+    const PG_AV_C: u16 = bits(&[PressureGradient, ArtificialViscosity, Continuity]);
+    const PG_AV: u16 = bits(&[PressureGradient, ArtificialViscosity]);
+    const C: u16 = bits(&[Continuity]);
+    const PG_AV_AP_C_MC: u16 = PG_AV_AP_C | bits(&[MolteniColagrossi]);
+    const PG_AV_AP_C_F: u16 = PG_AV_AP_C | bits(&[Fourtakas]);
+    const PG_AV_C_MC: u16 = PG_AV_C | bits(&[MolteniColagrossi]);
+    const PG_AV_C_F: u16 = PG_AV_C | bits(&[Fourtakas]);
+    const PG_AV_AP_C_D: u16 = PG_AV_AP_C | bits(&[DeltaSph]);
+    const PG_AV_C_D: u16 = PG_AV_C | bits(&[DeltaSph]);
     const RIEMANN: u16 = bits(&[RiemannPressure, Continuity, RiemannDiffusion]);
     if generic_only() {
         run_set(sim, *terms, out, chunk_power)
-    } else if let Some(set) = Fixed::<SPLASH>::of(terms) {
+    } else if let Some(set) = Fixed::<PG_AV_AP_C>::of(terms) {
         run_set(sim, set, out, chunk_power)
     } else if let Some(set) = Fixed::<RIEMANN>::of(terms) {
         run_set(sim, set, out, chunk_power)
-    } else if let Some(set) = Fixed::<SPLASH_F>::of(terms) {
+    } else if let Some(set) = Fixed::<PG_AV_AP_C_F>::of(terms) {
         run_set(sim, set, out, chunk_power)
-    } else if let Some(set) = Fixed::<WAVES_F>::of(terms) {
+    } else if let Some(set) = Fixed::<PG_AV_C_F>::of(terms) {
         run_set(sim, set, out, chunk_power)
-    } else if let Some(set) = Fixed::<SPLASH_MC>::of(terms) {
+    } else if let Some(set) = Fixed::<PG_AV_AP_C_MC>::of(terms) {
         run_set(sim, set, out, chunk_power)
-    } else if let Some(set) = Fixed::<WAVES_MC>::of(terms) {
+    } else if let Some(set) = Fixed::<PG_AV_C_MC>::of(terms) {
         run_set(sim, set, out, chunk_power)
-    } else if let Some(set) = Fixed::<SPLASH_D>::of(terms) {
+    } else if let Some(set) = Fixed::<PG_AV_AP_C_D>::of(terms) {
         run_set(sim, set, out, chunk_power)
-    } else if let Some(set) = Fixed::<WAVES_D>::of(terms) {
+    } else if let Some(set) = Fixed::<PG_AV_C_D>::of(terms) {
         run_set(sim, set, out, chunk_power)
-    } else if let Some(set) = Fixed::<WAVES>::of(terms) {
+    } else if let Some(set) = Fixed::<PG_AV_C>::of(terms) {
         run_set(sim, set, out, chunk_power)
-    } else if let Some(set) = Fixed::<PLAIN>::of(terms) {
+    } else if let Some(set) = Fixed::<PG_AV>::of(terms) {
         run_set(sim, set, out, chunk_power)
-    } else if let Some(set) = Fixed::<DENSITY>::of(terms) {
+    } else if let Some(set) = Fixed::<C>::of(terms) {
         run_set(sim, set, out, chunk_power)
     } else {
         run_set(sim, *terms, out, chunk_power)

@@ -145,6 +145,67 @@ fn every_instruction_set_sums_the_same_terms() {
     }
 }
 
+/// [`Probe`] compiled for no record layout: its passes find the offsets at run time.
+#[derive(Clone)]
+struct ProbeAnyLayout;
+
+impl PairTerm for ProbeAnyLayout {
+    const LAYOUTS: Layouts = Layouts::NONE;
+    type Acc<L: Lane> = [L; 3];
+    type Out = [f64; 3];
+    fn reads(&self) -> Fields {
+        Probe.reads()
+    }
+    fn zero<L: Lane>(&self) -> [L; 3] {
+        Probe.zero()
+    }
+    fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, acc: &mut [L; 3]) {
+        Probe.pair(me, p, acc)
+    }
+    fn finish<L: Lane>(&self, me: &Me, acc: [L; 3]) -> [f64; 3] {
+        Probe.finish(me, acc)
+    }
+}
+
+#[test]
+fn a_layout_a_term_is_not_compiled_for_sums_the_same_bits() {
+    let h = 0.013;
+    let k = Wendland::new(h);
+    let w = world(3);
+    // Records of the momentum layout, which `Probe` (every layout) reads with constant
+    // offsets and `ProbeAnyLayout` with offsets found at run time.
+    let r = packed(&w, Fields::of(&Field::MOMENTUM));
+    assert_eq!(Layouts::of(r.fields()), Layouts::MOMENTUM);
+    for isa in Isa::available().into_iter().chain([Isa::SCALAR]) {
+        for i in [10, 40, 70] {
+            let js = neighbours(&r, i, h);
+            let fixed = Pass::with_isa(&Probe, k, &r, isa).unwrap().sum(i, &js);
+            let found = Pass::with_isa(&ProbeAnyLayout, k, &r, isa)
+                .unwrap()
+                .sum(i, &js);
+            assert_ne!(fixed, [0.0; 3]);
+            assert_eq!(fixed.map(f64::to_bits), found.map(f64::to_bits), "{isa:?}");
+        }
+    }
+}
+
+#[test]
+fn layouts_name_the_three_compiled_field_sets() {
+    let rho = Fields::of(&[Field::Rho]);
+    assert_eq!(Layouts::of(rho), Layouts::FILTER);
+    assert_eq!(Layouts::of(Fields::of(&Field::MOMENTUM)), Layouts::MOMENTUM);
+    let slots = Fields::of(&[Field::Slot0, Field::Slot1]);
+    assert_eq!(
+        Layouts::of(Fields::of(&Field::MOMENTUM).with(slots)),
+        Layouts::GRADIENT
+    );
+    // (x, y, m) with pressures only: no compiled layout.
+    assert_eq!(Layouts::of(Fields::of(&[Field::PRho2])), Layouts::NONE);
+    assert!(Layouts::COMMON.has(Layouts::FILTER.with(Layouts::GRADIENT)));
+    assert!(!Layouts::FILTER.has(Layouts::MOMENTUM));
+    assert!(Layouts::FILTER.has(Layouts::NONE));
+}
+
 /// Every kernel's lane definition gives its scalar values on every instruction set.
 #[test]
 fn kernels_in_lanes_match_the_scalar_kernels() {
