@@ -7,12 +7,19 @@ use sph_scenario::overrides::Override;
 use sph_scenario::Scenario;
 use std::path::{Path, PathBuf};
 
-/// A fresh, empty output folder under the system temp folder.
+/// A fresh, empty output folder under the system temp folder, named by the tag, the
+/// process, the time and a count of the folders this process has asked for (two tests
+/// running the same tagged case at once can read the same clock).
 pub fn temp_out(tag: &str) -> PathBuf {
+    static COUNT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let k = COUNT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let nanos = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_nanos());
-    let dir = std::env::temp_dir().join(format!("sph-tests-{tag}-{}-{nanos}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!(
+        "sph-tests-{tag}-{}-{nanos}-{k}",
+        std::process::id()
+    ));
     let _ = std::fs::remove_dir_all(&dir);
     dir
 }
