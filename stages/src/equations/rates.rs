@@ -71,14 +71,7 @@ pub(crate) fn run(
     out: Outputs,
     chunk_power: &mut Vec<Power>,
 ) -> Result<Power, StepError> {
-    const fn bits(list: &[TermBit]) -> u16 {
-        let (mut set, mut k) = (0, 0);
-        while k < list.len() {
-            set |= 1 << list[k] as u16;
-            k += 1;
-        }
-        set
-    }
+    use crate::terms::set_of as bits;
     use TermBit::*;
     // The sets the shipped scenarios and studies run get loops compiled for them,
     // named by their terms: the pressure gradient (PG) with Monaghan's artificial

@@ -36,6 +36,17 @@ use sph_core::registry::{Identifier, ParamError, SeqOf};
 use sph_core::sim::Constants;
 pub use sph_core::terms::{PrePass, Term, TermParams, TermRegistry};
 
+/// The term set of `list`: bit k for the k-th term of the list ([`TermBit`], as
+/// [`RateTerms::set`]).
+pub(crate) const fn set_of(list: &[TermBit]) -> u16 {
+    let (mut set, mut k) = (0, 0);
+    while k < list.len() {
+        set |= 1 << list[k] as u16;
+        k += 1;
+    }
+    set
+}
+
 /// A viscous term's reads: `base`, and the ghosts' no-slip velocities when it reads
 /// them ([`Term::wall_shear`]).
 pub(crate) fn with_wall_shear(base: Fields, shear: bool) -> Fields {
@@ -371,5 +382,7 @@ rate_terms! {
     riemann_diffusion::RiemannDiffusion,
 }
 
+#[cfg(test)]
+mod generic_tests;
 #[cfg(test)]
 mod tests;

@@ -16,12 +16,12 @@ use sph_core::sim::{Constants, Tait};
 use sph_core::world::Particles;
 
 const DS: f64 = 0.01;
-const H: f64 = 1.3 * DS;
+pub(super) const H: f64 = 1.3 * DS;
 const RHO0: f64 = 1000.0;
 const C0: f64 = 30.0;
 const G: f64 = 9.81;
 
-fn constants() -> Constants {
+pub(super) fn constants() -> Constants {
     Constants {
         eos: Tait::new(RHO0, C0, 7.0),
         gravity: DVec2::new(0.0, -G),
@@ -65,7 +65,7 @@ fn still_water() -> (hecs::World, usize) {
     (lattice(21, ny, |x| eos.density(RHO0 * G * (top - x.y))), ny)
 }
 
-fn packed(world: &hecs::World, fields: sph_core::pair::Fields) -> Records {
+pub(super) fn packed(world: &hecs::World, fields: sph_core::pair::Fields) -> Records {
     let mut r = Records::default();
     let mut columns = Columns::default();
     if fields.contains(DensityGradient::X) {
@@ -95,7 +95,7 @@ fn gradients(world: &hecs::World) -> Vec<DVec2> {
         .collect()
 }
 
-fn neighbours(r: &Records, i: usize, support: f64) -> Vec<u32> {
+pub(super) fn neighbours(r: &Records, i: usize, support: f64) -> Vec<u32> {
     let at = |j: usize| DVec2::new(r.get(j, Field::X), r.get(j, Field::Y));
     (0..r.len() as u32)
         .filter(|&j| j as usize != i && (at(i) - at(j as usize)).length() < support)
@@ -183,7 +183,7 @@ fn fourtakas_leaves_hydrostatic_water_at_rest() {
 
 /// A jittered 12 x 12 lattice, its bottom row ghosts (of source 0), with random
 /// densities and velocities.
-fn jittered_world() -> hecs::World {
+pub(super) fn jittered_world() -> hecs::World {
     let mut state = 12345u64;
     let mut next = move || {
         state = state
