@@ -26,7 +26,10 @@
 //! eq. 23: zero velocity at the wall), with `slip: WallVelocity` v_b itself (every
 //! term reads the wall's velocity, so a fluid sliding along the wall is braked by the
 //! dissipation of each pair's approach). A wall particle in a corner takes the tangent
-//! of the wall it was laid out for.
+//! of the wall it was laid out for. With `mirror: true` continuity and the pressures
+//! read v_b - ((u_f - v_b) . n) n, the mirror image of the fluid's normal velocity, and
+//! the viscous velocity takes the same normal part: the wall state u_R = 2 u_w - u_L
+//! along n of Zhang, Hu & Adams's (2017) one-sided Riemann problem, from u_f.
 //!
 //! Runs after `Eos` (the fluid's pressures) and before the rate stages. The sums are
 //! taken over the fluid's neighbour lists in fluid order, one thread, so the result is
@@ -72,6 +75,13 @@ pub struct Params {
     /// particle's pressure (SPHinXsys's wall), so the wall beside and above a free
     /// surface never pulls. Default false (Adami's eq. 27 as written).
     pub one_sided: bool,
+    /// Give each wall particle the mirror image of the nearby fluid's velocity along
+    /// the wall's normal, v_b - ((u_f - v_b) . n) n, in continuity and the pressures,
+    /// and the same normal part in the viscous velocity: the wall state of a
+    /// one-sided Riemann problem, u_R = 2 u_w - u_L along n (Zhang, Hu & Adams
+    /// 2017), as a mirrored ghost has it, on a fixed lattice whose push does not
+    /// vanish at the wall. Not with `separation`. Default false.
+    pub mirror: bool,
 }
 
 pub fn register(registry: &mut StageRegistry) {
@@ -79,10 +89,18 @@ pub fn register(registry: &mut StageRegistry) {
         "wall_pressure",
         "extrapolate the fluid's pressure to the wall particles (Adami et al. 2012)",
         |p: Params| {
+            if p.mirror && p.separation {
+                return Err(sph_core::ParamError::new(
+                    "mirror",
+                    true,
+                    "false when `separation` is true: the two set the wall particles' normal velocity differently",
+                ));
+            }
             Ok(WallPressure {
                 slip: p.slip,
                 separation: p.separation,
                 one_sided: p.one_sided,
+                mirror: p.mirror,
                 sums: Vec::new(),
                 pull: Vec::new(),
             })
@@ -105,6 +123,7 @@ pub struct WallPressure {
     slip: Slip,
     separation: bool,
     one_sided: bool,
+    mirror: bool,
     sums: Vec<Sums>,
     /// g - a_w per ghost, for the one-sided sums (zero elsewhere); kept between
     /// steps only to reuse its allocation.
@@ -249,8 +268,13 @@ impl Stage for WallPressure {
                     Slip::NoSlip => 2.0 * v_b - u,
                     Slip::WallVelocity => v_b,
                 };
-                if self.separation {
-                    let n = wall.normal();
+                let n = wall.normal();
+                if self.mirror {
+                    let away = (u - v_b).dot(n);
+                    gv[k].0 = v_b - away * n;
+                    let v = viscous[k];
+                    viscous[k] = v - ((v - v_b).dot(n) + away) * n;
+                } else if self.separation {
                     gv[k].0 = v_b + (u - v_b).dot(n).max(0.0) * n;
                 }
             } else {

@@ -462,6 +462,16 @@ pub fn cases() -> Vec<Case> {
             &["2 is out of range", "0 < C <= 1"],
         ),
         case(
+            "wall particles that both mirror and follow the fluid",
+            dam_stage(
+                "Eos",
+                "Eos(),\n        WallPressure(mirror: true, separation: true)",
+            ),
+            LineOf("WallPressure("),
+            Is("mirror"),
+            &["false when `separation` is true"],
+        ),
+        case(
             "stage without parentheses",
             dam_stage("NeighbourGrid", "NeighbourGrid"),
             LineOf("NeighbourGrid,"),
