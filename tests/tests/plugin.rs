@@ -3,6 +3,7 @@
 
 use sph_run::runner::{run, RunOptions};
 use sph_scenario::Scenario;
+use sph_tests::support::nan_max;
 use std::path::Path;
 
 const FILE: &str = concat!(
@@ -147,7 +148,7 @@ fn spread(sim: &sph_core::sim::Sim) -> (f64, glam::DVec2) {
         .map(|p| p.0)
         .collect();
     let c = x.iter().copied().sum::<glam::DVec2>() / x.len() as f64;
-    let r = x.iter().map(|&p| (p - c).length()).fold(0.0, f64::max);
+    let r = x.iter().map(|&p| (p - c).length()).fold(0.0, nan_max);
     (r / 0.05, c)
 }
 
