@@ -14,6 +14,8 @@ pub mod vocab;
 pub mod neighbours;
 pub use neighbours::{neighbour_grid, scan, sort_particles};
 
+#[cfg(test)]
+mod testing;
 pub mod walls;
 pub(crate) use walls::wall_work;
 pub use walls::{ghost_walls, wall_particles, wall_pressure};

@@ -87,8 +87,6 @@ mod tests {
     use super::*;
     use glam::DVec2;
     use sph_core::components::Position;
-    use sph_core::kernel::KernelKind;
-    use sph_core::sim::{Clock, Constants, Resources};
 
     /// Tait by hand: B [(rho/rho_0)^7 - 1], B = rho_0 c_0^2 / 7 (relative 1e-12:
     /// round-off of the powers).
@@ -96,25 +94,7 @@ mod tests {
         1000.0 * 20.0 * 20.0 / 7.0 * ((rho / 1000.0).powi(7) - 1.0)
     }
 
-    fn sim(world: hecs::World) -> Sim {
-        Sim {
-            world,
-            clock: Clock::default(),
-            constants: Constants {
-                eos: Tait::new(1000.0, 20.0, 7.0),
-                gravity: DVec2::new(0.0, -9.81),
-                spacing: 0.01,
-                h: 0.013,
-                kernel: KernelKind::Wendland,
-                fluid_height: 0.1,
-                domain: (DVec2::splat(-1.0), DVec2::splat(1.0)),
-            },
-            resources: Resources::default(),
-            out_dir: std::env::temp_dir(),
-            name: "eos".into(),
-            diagnostics: Default::default(),
-        }
-    }
+    use crate::testing::sim;
 
     /// The stage gives fluid and ghosts the Tait pressure of their density, raised to
     /// the floor when one is set.

@@ -42,13 +42,6 @@ pub struct ArtificialViscosity {
     shear: bool,
 }
 
-impl ArtificialViscosity {
-    /// The linear coefficient alpha.
-    pub fn alpha(&self) -> f64 {
-        self.alpha
-    }
-}
-
 impl Term for ArtificialViscosity {
     const READS: Fields = Fields::of(&[Field::Vx, Field::Vy, Field::Rho, Field::Sound]);
     type Params = Params;

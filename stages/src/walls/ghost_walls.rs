@@ -521,3 +521,68 @@ fn resize_pool(world: &mut hecs::World, needed: usize) {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn stage() -> GhostWalls {
+        GhostWalls {
+            params: Params::default(),
+            walls: Walls::default(),
+            images: Vec::new(),
+            chunks: Vec::new(),
+            built: None,
+        }
+    }
+
+    /// A closed 0.5 m x 0.3 m box with fluid particles at `at`.
+    fn boxed(at: &[(f64, f64)]) -> Sim {
+        let mut world = hecs::World::new();
+        crate::testing::closed_box(&mut world, 0.5, 0.3);
+        for &(x, y) in at {
+            world.spawn((
+                Fluid,
+                Position(DVec2::new(x, y)),
+                Velocity(DVec2::new(0.1, -0.2)),
+                Density(1000.0),
+                Pressure(0.0),
+                Mass(0.1),
+            ));
+        }
+        crate::testing::sim(world)
+    }
+
+    /// A checkpoint holds the ghosts as they were found (which walls each mirrors
+    /// across, a corner's two) and when: a stage loaded from it saves the same bytes,
+    /// and a stage that loads nothing does not. A particle in a corner (two single
+    /// images and a double), one near the floor, one far from every wall.
+    #[test]
+    fn the_ghosts_found_come_back_from_a_checkpoint() {
+        let mut sim = boxed(&[(0.005, 0.006), (0.25, 0.004), (0.25, 0.15)]);
+        let mut found = stage();
+        found.setup(&mut sim).unwrap();
+        found.run(&mut sim).unwrap();
+        let (singles, doubles) = (
+            found.images.iter().filter(|i| i.second.is_none()).count(),
+            found.images.iter().filter(|i| i.second.is_some()).count(),
+        );
+        assert_eq!(
+            (singles, doubles),
+            (3, 1),
+            "the corner's 2 + 1, the floor's 1"
+        );
+        let saved = found.save_state(&sim).unwrap();
+        let mut loaded = stage();
+        loaded.load_state(&mut sim, &saved).unwrap();
+        assert_eq!(loaded.save_state(&sim).unwrap(), saved);
+        assert_ne!(stage().save_state(&sim).unwrap(), saved);
+        let walls = |s: &GhostWalls| -> Vec<(u16, Option<u16>)> {
+            s.images.iter().map(|i| (i.first, i.second)).collect()
+        };
+        assert_eq!(walls(&loaded), walls(&found));
+        assert_eq!(loaded.built, found.built);
+        // A checkpoint keys each stage's state by its name, the registered one.
+        assert_eq!(found.name(), "ghost_walls");
+    }
+}

@@ -246,26 +246,10 @@ mod tests {
         }
     }
 
-    /// The closed 0.9 m x 0.5 m box, walls counter-clockwise so the fluid is inside.
-    fn box_walls(world: &mut hecs::World) {
-        let corners = [(0.0, 0.0), (0.9, 0.0), (0.9, 0.5), (0.0, 0.5)];
-        for k in 0..4 {
-            let (a, b) = (corners[k], corners[(k + 1) % 4]);
-            let rest = Wall {
-                name: format!("w{k}"),
-                a: DVec2::new(a.0, a.1),
-                b: DVec2::new(b.0, b.1),
-                body: Default::default(),
-            };
-            let now = rest.at_rest();
-            world.spawn((rest, now));
-        }
-    }
-
     #[test]
     fn the_band_behind_a_box_is_filled_once_on_the_lattice() {
         let mut world = hecs::World::new();
-        box_walls(&mut world);
+        crate::testing::closed_box(&mut world, 0.9, 0.5);
         let walls = Walls::of(&world);
         let (ds, layers) = (0.1, 3);
         let depth = ds * layers as f64;

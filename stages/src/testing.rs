@@ -1,0 +1,45 @@
+//! Worlds for the stages' unit tests.
+
+use glam::DVec2;
+use sph_core::components::Wall;
+use sph_core::kernel::KernelKind;
+use sph_core::sim::{Clock, Constants, Resources, Sim, Tait};
+
+/// A sim over `world`: water (rho_0 1000 kg/m^3, c_0 20 m/s, Tait 7) under vertical
+/// gravity, spacing 0.01 m, h 0.013 m (Wendland).
+pub(crate) fn sim(world: hecs::World) -> Sim {
+    Sim {
+        world,
+        clock: Clock::default(),
+        constants: Constants {
+            eos: Tait::new(1000.0, 20.0, 7.0),
+            gravity: DVec2::new(0.0, -9.81),
+            spacing: 0.01,
+            h: 0.013,
+            kernel: KernelKind::Wendland,
+            fluid_height: 0.1,
+            domain: (DVec2::splat(-1.0), DVec2::splat(1.0)),
+        },
+        resources: Resources::default(),
+        out_dir: std::env::temp_dir(),
+        name: "unit".into(),
+        diagnostics: Default::default(),
+    }
+}
+
+/// The four walls of a closed `width` x `height` box from the origin, at rest,
+/// counter-clockwise so that the fluid is inside.
+pub(crate) fn closed_box(world: &mut hecs::World, width: f64, height: f64) {
+    let corners = [(0.0, 0.0), (width, 0.0), (width, height), (0.0, height)];
+    for k in 0..4 {
+        let (a, b) = (corners[k], corners[(k + 1) % 4]);
+        let rest = Wall {
+            name: format!("w{k}"),
+            a: DVec2::new(a.0, a.1),
+            b: DVec2::new(b.0, b.1),
+            body: Default::default(),
+        };
+        let now = rest.at_rest();
+        world.spawn((rest, now));
+    }
+}
