@@ -553,6 +553,45 @@ mod tests {
         crate::testing::sim(world)
     }
 
+    /// With lasting neighbour lists (a skin), a step on which nothing has moved keeps
+    /// the ghosts found last and tells the grid to keep its lists; the first step finds
+    /// them and asks for a rebuild.
+    #[test]
+    fn unmoved_ghosts_keep_the_neighbour_lists() {
+        let mut sim = boxed(&[(0.005, 0.006), (0.25, 0.004), (0.25, 0.15)]);
+        sim.resources.insert(Neighbours {
+            skin: 0.004,
+            ..Default::default()
+        });
+        let mut walls = stage();
+        walls.setup(&mut sim).unwrap();
+        walls.run(&mut sim).unwrap();
+        let plan = |sim: &Sim| sim.resources.get::<Neighbours>().unwrap().plan;
+        assert_eq!(plan(&sim), ListPlan::Rebuild);
+        // The grid's build: the lists hold these positions.
+        let at = |sim: &Sim, ghosts: bool| -> Vec<DVec2> {
+            let a = if ghosts {
+                archetype::<Ghost>(&sim.world)
+            } else {
+                archetype::<Fluid>(&sim.world)
+            };
+            column::<Position>(a.unwrap())
+                .unwrap()
+                .iter()
+                .map(|p| p.0)
+                .collect()
+        };
+        let (fluid, ghosts) = (at(&sim, false), at(&sim, true));
+        assert_eq!(ghosts.len(), 4);
+        let nb = sim.resources.get_mut::<Neighbours>().unwrap();
+        (nb.n_fluid, nb.n_ghost) = (fluid.len(), ghosts.len());
+        nb.built_at = fluid.iter().chain(&ghosts).copied().collect();
+        nb.plan = ListPlan::Undecided;
+        walls.run(&mut sim).unwrap();
+        assert_eq!(plan(&sim), ListPlan::Keep);
+        assert_eq!(at(&sim, true), ghosts);
+    }
+
     /// A checkpoint holds the ghosts as they were found (which walls each mirrors
     /// across, a corner's two) and when: a stage loaded from it saves the same bytes,
     /// and a stage that loads nothing does not. A particle in a corner (two single
