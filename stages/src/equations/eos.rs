@@ -85,6 +85,7 @@ fn apply(eos: &Tait, floor: f64, rho: &[Density], p: &mut [Pressure]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testing::sim;
     use glam::DVec2;
     use sph_core::components::Position;
 
@@ -93,8 +94,6 @@ mod tests {
     fn tait(rho: f64) -> f64 {
         1000.0 * 20.0 * 20.0 / 7.0 * ((rho / 1000.0).powi(7) - 1.0)
     }
-
-    use crate::testing::sim;
 
     /// The stage gives fluid and ghosts the Tait pressure of their density, raised to
     /// the floor when one is set.

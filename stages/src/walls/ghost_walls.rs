@@ -74,15 +74,7 @@ pub fn register(registry: &mut StageRegistry) {
     registry.register_checked(
         "ghost_walls",
         "mirror fluid particles across the walls as ghost particles",
-        |p: Params| {
-            Ok(GhostWalls {
-                params: p,
-                walls: Walls::default(),
-                images: Vec::new(),
-                chunks: Vec::new(),
-                built: None,
-            })
-        },
+        |p: Params| Ok(GhostWalls::new(p)),
     );
 }
 
@@ -250,6 +242,17 @@ impl Stage for GhostWalls {
 }
 
 impl GhostWalls {
+    /// The stage with `params`, before its first step: no ghosts found yet.
+    fn new(params: Params) -> Self {
+        Self {
+            params,
+            walls: Walls::default(),
+            images: Vec::new(),
+            chunks: Vec::new(),
+            built: None,
+        }
+    }
+
     /// Whether the ghosts found last can serve this step: the fluid and ghost counts
     /// are those of the finding, and no wall end has moved half the `skin` since (a
     /// segment moved rigidly moves no point farther than its ends).
@@ -527,20 +530,15 @@ mod tests {
     use super::*;
 
     fn stage() -> GhostWalls {
-        GhostWalls {
-            params: Params::default(),
-            walls: Walls::default(),
-            images: Vec::new(),
-            chunks: Vec::new(),
-            built: None,
-        }
+        GhostWalls::new(Params::default())
     }
 
-    /// A closed 0.5 m x 0.3 m box with fluid particles at `at`.
-    fn boxed(at: &[(f64, f64)]) -> Sim {
+    /// A closed 0.5 m x 0.3 m box with three fluid particles: one in a corner (two
+    /// single images and a double), one near the floor, one far from every wall.
+    fn boxed() -> Sim {
         let mut world = hecs::World::new();
         crate::testing::closed_box(&mut world, 0.5, 0.3);
-        for &(x, y) in at {
+        for (x, y) in [(0.005, 0.006), (0.25, 0.004), (0.25, 0.15)] {
             world.spawn((
                 Fluid,
                 Position(DVec2::new(x, y)),
@@ -558,7 +556,7 @@ mod tests {
     /// them and asks for a rebuild.
     #[test]
     fn unmoved_ghosts_keep_the_neighbour_lists() {
-        let mut sim = boxed(&[(0.005, 0.006), (0.25, 0.004), (0.25, 0.15)]);
+        let mut sim = boxed();
         sim.resources.insert(Neighbours {
             skin: 0.004,
             ..Default::default()
@@ -594,11 +592,10 @@ mod tests {
 
     /// A checkpoint holds the ghosts as they were found (which walls each mirrors
     /// across, a corner's two) and when: a stage loaded from it saves the same bytes,
-    /// and a stage that loads nothing does not. A particle in a corner (two single
-    /// images and a double), one near the floor, one far from every wall.
+    /// and a stage that loads nothing does not.
     #[test]
     fn the_ghosts_found_come_back_from_a_checkpoint() {
-        let mut sim = boxed(&[(0.005, 0.006), (0.25, 0.004), (0.25, 0.15)]);
+        let mut sim = boxed();
         let mut found = stage();
         found.setup(&mut sim).unwrap();
         found.run(&mut sim).unwrap();
