@@ -257,6 +257,37 @@ pub struct DfsphFactors {
     /// `Density` column, the continuity density the next step's factor stage floors the
     /// summation density with.
     pub continuity_floor: bool,
+    /// m_j grad_i W_ij of every fluid particle's listed pairs at this step's positions
+    /// (`DfsphFactor`), which the solves' passes sum against velocities or pressures.
+    pub gradients: PairGradients,
+}
+
+/// Per-pair kernel gradients in the neighbour lists' order: the pairs of fluid particle
+/// i are `grad[start[i]..start[i + 1]]`, one per entry of its list, each
+/// m_j grad_i W_ij. Valid while the positions and the lists stay as they were filled.
+#[derive(Debug, Default, Clone)]
+pub struct PairGradients {
+    pub start: Vec<usize>,
+    pub grad: Vec<DVec2>,
+}
+
+impl PairGradients {
+    /// Particle i's gradients.
+    ///
+    /// # Panics
+    /// If i is not below the fluid count the gradients were filled for.
+    #[inline]
+    pub fn row(&self, i: usize) -> &[DVec2] {
+        &self.grad[self.start[i]..self.start[i + 1]]
+    }
+
+    /// Whether these were filled for `lists`: the same fluid count and the same length
+    /// of every list.
+    pub fn fits(&self, lists: &sph_core::vocab::Neighbours) -> bool {
+        let n = lists.n_fluid;
+        self.start.len() == n + 1
+            && (0..n).all(|i| self.start[i + 1] - self.start[i] == lists.of(i).len())
+    }
 }
 
 /// The step the pressure solve chose (from the velocity CFL condition), for the stage

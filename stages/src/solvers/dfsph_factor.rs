@@ -8,20 +8,18 @@
 //! of the wall's body at the source (as `vocab::ghost_density` carries it in
 //! WCSPH), else 0. Both go to `vocab::DfsphFactors` for the two solves.
 
-use crate::pressure_solve::each;
-use crate::terms::dfsph_factor::DensityFactor;
-use crate::vocab::{DfsphFactors, GhostSettings};
+use crate::vocab::{DfsphFactors, GhostSettings, PairGradients};
+use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure};
 use sph_core::contract::Access;
 use sph_core::kernel::Kernel;
 use sph_core::motion::Pose;
-use sph_core::pair::{Field, Fields};
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
-use sph_core::vocab::{require_neighbours, MirrorWall, WallPose};
-use sph_core::world::{archetype, column, column_mut};
+use sph_core::vocab::{require_neighbours, MirrorWall, Neighbours, WallPose};
+use sph_core::world::{archetype, column, column_mut, Particles};
 use sph_core::{with_kernel, StageRegistry};
 
 /// `DfsphFactor(continuity_floor: true)`.
@@ -135,23 +133,12 @@ impl Stage for DfsphFactor {
             return Ok(());
         };
         self.out.resize(fluid.len() as usize, (0.0, 0.0));
-        let c = &sim.constants;
-        let w0 = with_kernel!(c.kernel, c.h, |k| k.w(0.0));
-        // Packed with the density as well, the layout the filters' loops are compiled
-        // for (the term reads geometry and mass only).
-        let fields = Fields::of(&[Field::Rho]);
-        each(sim, &DensityFactor { w0 }, fields, &mut self.out, |o| o)?;
-        // The column holds the last density solve's prediction (rho_0 at the start).
-        if let (true, Some(fluid)) = (self.continuity_floor, archetype::<Fluid>(&sim.world)) {
-            let rho_c = column::<Density>(fluid)?;
-            self.out
-                .par_iter_mut()
-                .zip(rho_c.par_iter())
-                .for_each(|(o, r)| o.0 = o.0.max(r.0));
-        }
-        // The resource keeps its buffers from step to step.
+        // The resource keeps its buffers from step to step; it goes back on every path.
         let mut factors = sim.resources.take::<DfsphFactors>().unwrap_or_default();
-        let result = self.write(sim, &mut factors);
+        let result = self
+            .sums(sim, &mut factors.gradients)
+            .and_then(|()| self.floor(sim))
+            .and_then(|()| self.write(sim, &mut factors));
         sim.resources.insert(factors);
         result
     }
@@ -170,6 +157,93 @@ impl Stage for DfsphFactor {
 }
 
 impl DfsphFactor {
+    /// With the continuity floor, each density at least the last density solve's
+    /// prediction, which the column holds (rho_0 at the start).
+    fn floor(&mut self, sim: &Sim) -> Result<(), StepError> {
+        if let (true, Some(fluid)) = (self.continuity_floor, archetype::<Fluid>(&sim.world)) {
+            let rho_c = column::<Density>(fluid)?;
+            self.out
+                .par_iter_mut()
+                .zip(rho_c.par_iter())
+                .for_each(|(o, r)| o.0 = o.0.max(r.0));
+        }
+        Ok(())
+    }
+
+    /// One pass over the neighbour lists (Bender & Koschier 2017, eqs. 2 and 11):
+    ///   rho_i   = m_i W(0) + sum_j m_j W_ij,
+    ///   alpha_i = rho_i^2 / ( |sum_j m_j grad_i W_ij|^2 + sum_j |m_j grad_i W_ij|^2 ),
+    /// the factor in the pressure form p_i = alpha_i (rho*_i - rho_0) / dt^2 of their
+    /// kappa_i = (rho*_i - rho_0) / dt^2 alpha_i / rho_i (the paper's alpha_i is ours
+    /// divided by rho_i), into `self.out`; and every pair's m_j grad_i W_ij into
+    /// `gradients`, which the solves' passes reuse at these positions. A pair at
+    /// r = 0 has no gradient, and a particle without one no factor (alpha_i = 0: no
+    /// pressure can act on it).
+    fn sums(&mut self, sim: &Sim, gradients: &mut PairGradients) -> Result<(), StepError> {
+        let Some(nb) = sim.resources.get::<Neighbours>() else {
+            return Err(StepError::Internal(
+                "DfsphFactor needs the neighbour lists: NeighbourGrid must run before it".into(),
+            ));
+        };
+        let Some(particles) = Particles::of(&sim.world) else {
+            return Ok(());
+        };
+        let (x, m) = (particles.joined::<Position>()?, particles.joined::<Mass>()?);
+        let (x, m) = (x.view(), m.view());
+        let n = x.fluid.len();
+        nb.check_covers(n + x.ghost.len())?;
+        if nb.n_fluid != n {
+            return Err(StepError::Internal(format!(
+                "the neighbour lists cover {} fluid particles but the world holds {n}",
+                nb.n_fluid
+            )));
+        }
+        let start = &mut gradients.start;
+        start.clear();
+        start.push(0);
+        for i in 0..n {
+            start.push(start[i] + nb.of(i).len());
+        }
+        gradients.grad.clear();
+        gradients.grad.resize(start[n], DVec2::ZERO);
+        // Each particle's row of the flat buffer, to fill them in parallel.
+        let mut rows = Vec::with_capacity(n);
+        let mut rest = &mut gradients.grad[..];
+        for i in 0..n {
+            let (row, tail) = rest.split_at_mut(nb.of(i).len());
+            rows.push(row);
+            rest = tail;
+        }
+        let at = |j: usize| match j.checked_sub(n) {
+            None => (x.fluid[j].0, m.fluid[j].0),
+            Some(g) => (x.ghost[g].0, m.ghost[g].0),
+        };
+        self.out.resize(n, (0.0, 0.0));
+        let c = &sim.constants;
+        with_kernel!(c.kernel, c.h, |k| {
+            let w0 = k.w(0.0);
+            rows.into_par_iter()
+                .zip(self.out.par_iter_mut())
+                .enumerate()
+                .for_each(|(i, (row, out))| {
+                    let xi = x.fluid[i].0;
+                    let (mut rho, mut sum, mut s2) = (m.fluid[i].0 * w0, DVec2::ZERO, 0.0);
+                    for (g, &j) in row.iter_mut().zip(nb.of(i)) {
+                        let (xj, mj) = at(j as usize);
+                        let d = xi - xj;
+                        let r = d.length();
+                        *g = mj * k.grad(d, r);
+                        rho += mj * k.w(r);
+                        sum += *g;
+                        s2 += g.length_squared();
+                    }
+                    let d = sum.length_squared() + s2;
+                    *out = (rho, if d > 0.0 { rho * rho / d } else { 0.0 });
+                })
+        });
+        Ok(())
+    }
+
     /// Writes the densities (fluid, then ghosts from their sources), the factors and
     /// the ghosts' pressure carries into `factors`.
     fn write(&self, sim: &Sim, factors: &mut DfsphFactors) -> Result<(), StepError> {

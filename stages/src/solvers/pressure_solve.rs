@@ -1,7 +1,10 @@
 //! The Jacobi iteration the two DFSPH solves share (docs/physics.md, "DFSPH"; Bender &
-//! Koschier 2017, Algorithms 2 and 3), written with the pressure-gradient and
-//! continuity terms of the pair layer. Not a stage: `DivergenceSolve` and `DensitySolve`
-//! run it with their own target.
+//! Koschier 2017, Algorithms 2 and 3). Not a stage: `DivergenceSolve` and
+//! `DensitySolve` run it with their own target. Its passes are the `PressureGradient`
+//! and `Continuity` sums written over the pair gradients m_j grad_i W_ij that
+//! `DfsphFactor` keeps for the step (`vocab::PairGradients`): the positions do not
+//! change during a solve, so the kernel is evaluated once per step rather than once
+//! per pass (docs/performance.md, "DFSPH time to solution").
 //!
 //! Given velocities v0 (the state before the pressure acts) and a step dt, it seeks
 //! pressures p >= 0 such that the velocities v = v0 + dt a_p(p), with
@@ -50,26 +53,21 @@
 //! velocity change. Ghosts get no equation of their own.
 //!
 //! Deterministic for any thread count: every particle's sums are gathers over its own
-//! neighbour list, and the error is summed in fixed chunks (`world::sum_fixed`).
+//! neighbour list in list order, and the error is summed in fixed chunks
+//! (`world::sum_fixed`).
 
-use crate::vocab::{DfsphFactors, GhostReflections, NoSlipSigns, NoSlipVelocity};
+use crate::vocab::{DfsphFactors, GhostReflections, NoSlipSigns, NoSlipVelocity, PairGradients};
 use glam::DVec2;
 use rayon::prelude::*;
 use sph_core::components::{Density, Fluid, Ghost, Pressure, Velocity};
 use sph_core::kernel::Kernel;
 use sph_core::pair::Columns;
-use sph_core::pair::{
-    with_records, with_records_packed, EquationsOfMotion, Field, Fields, Packing, PairTerm, Pass,
-    RateSums,
-};
 use sph_core::sim::Resources;
 use sph_core::sim::Sim;
 use sph_core::stage::StepError;
 use sph_core::vocab::Neighbours;
 use sph_core::with_kernel;
 use sph_core::world::{archetype, column, column_mut, sum_fixed};
-
-use crate::terms::{continuity::Continuity, pressure_gradient::PressureGradient, Term};
 
 /// What a solve drives to zero (see the module docs).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -114,6 +112,9 @@ pub(crate) struct Jacobi {
     pub rate: Vec<f64>,
     /// The pressure acceleration of each fluid particle.
     pub acc: Vec<DVec2>,
+    /// Joint (fluid, then ghost) buffers: velocities, or p / rho^2.
+    joint_v: Vec<DVec2>,
+    joint_q: Vec<f64>,
 }
 
 impl Jacobi {
@@ -134,7 +135,13 @@ impl Jacobi {
             false => vec![0.0; factors.ghost_offset.len()],
         };
         let offsets = if carry { &factors.ghost_offset } else { &zeros };
-        let solved = self.solve(sim, dt, target, limits, &factors.alpha, offsets);
+        let solved = self.solve(
+            sim,
+            dt,
+            target,
+            limits,
+            (&factors.alpha, offsets, &factors.gradients),
+        );
         sim.resources.insert(factors);
         let outcome = solved?;
         // The ghosts' no-slip velocities follow their sources' change too.
@@ -149,15 +156,14 @@ impl Jacobi {
     /// Solves for the pressures in the `Pressure` column, starting from the fluid's
     /// pressures there (a warm start; zeros for none), and leaves the corrected
     /// velocities in `Velocity` (fluid and ghosts) and the final pressure acceleration
-    /// in `self.acc`. `alpha` and `offsets` are `DfsphFactors`' columns.
+    /// in `self.acc`. `alpha`, `offsets` and `gradients` are `DfsphFactors`'.
     pub(crate) fn solve(
         &mut self,
         sim: &mut Sim,
         dt: f64,
         target: Target,
         limits: Limits,
-        alpha: &[f64],
-        offsets: &[f64],
+        (alpha, offsets, gradients): (&[f64], &[f64], &PairGradients),
     ) -> Result<Outcome, StepError> {
         self.acc.clear();
         let Some(fluid) = archetype::<Fluid>(&sim.world) else {
@@ -207,14 +213,21 @@ impl Jacobi {
         // Every pass of the solve reads these records; positions, densities and
         // masses stay as they are through the solve, so each pass packs again only
         // the velocities or the pressures that the iterations change.
-        with_records(sim, SOLVE_FIELDS, |_, _, _| Ok(()))?;
+        let Some(nb) = sim.resources.get::<Neighbours>() else {
+            return Err(StepError::Internal("no neighbour lists".into()));
+        };
+        if !gradients.fits(nb) {
+            return Err(StepError::Internal(
+                "the DFSPH pair gradients do not fit the neighbour lists: DfsphFactor must run after NeighbourGrid and before the solves".into(),
+            ));
+        }
         if warm > 0.0 {
-            self.pressure_acceleration(sim)?;
+            self.pressure_acceleration(sim, gradients)?;
             self.set_velocities(sim, dt)?;
         }
         let mut iterations = 0;
         loop {
-            self.divergence(sim)?;
+            self.divergence(sim, gradients)?;
             let Some(fluid) = archetype::<Fluid>(&sim.world) else {
                 return Ok(Outcome::default());
             };
@@ -247,25 +260,68 @@ impl Jacobi {
             });
             drop((p_col, rho_col));
             sync_ghost_pressures(sim, offsets)?;
-            self.pressure_acceleration(sim)?;
+            self.pressure_acceleration(sim, gradients)?;
             self.set_velocities(sim, dt)?;
             iterations += 1;
         }
     }
 
-    /// D rho/Dt of every fluid particle from the velocities in the columns.
-    fn divergence(&mut self, sim: &mut Sim) -> Result<(), StepError> {
-        let term = EquationsOfMotion(Continuity);
-        let velocities = Packing::Refresh(Fields::of(&[Field::Vx, Field::Vy]));
-        each_packed(sim, &term, velocities, &mut self.rate, |s: RateSums| s.drho)
+    /// D rho/Dt = sum_j m_j v_ij . grad_i W_ij of every fluid particle (the
+    /// `Continuity` term) from the velocities in the columns.
+    fn divergence(&mut self, sim: &Sim, gradients: &PairGradients) -> Result<(), StepError> {
+        let Some(particles) = sph_core::world::Particles::of(&sim.world) else {
+            return Ok(());
+        };
+        let v = particles.joined::<Velocity>()?;
+        let v = v.view();
+        self.joint_v.clear();
+        self.joint_v
+            .extend(v.fluid.iter().chain(v.ghost).map(|v| v.0));
+        let joint = &self.joint_v;
+        let nb = neighbours(sim, self.rate.len())?;
+        self.rate.par_iter_mut().enumerate().for_each(|(i, r)| {
+            let vi = joint[i];
+            *r = gradients
+                .row(i)
+                .iter()
+                .zip(nb.of(i))
+                .fold(0.0, |s, (g, &j)| s + (vi - joint[j as usize]).dot(*g));
+        });
+        Ok(())
     }
 
-    /// The pressure acceleration of every fluid particle from the pressures in the
-    /// columns.
-    fn pressure_acceleration(&mut self, sim: &mut Sim) -> Result<(), StepError> {
-        let term = EquationsOfMotion(PressureGradient);
-        let pressures = Packing::Refresh(Fields::of(&[Field::PRho2]));
-        each_packed(sim, &term, pressures, &mut self.acc, |s: RateSums| s.acc)
+    /// a_p,i = - sum_j m_j (p_i/rho_i^2 + p_j/rho_j^2) grad_i W_ij of every fluid
+    /// particle (the `PressureGradient` term) from the pressures in the columns.
+    fn pressure_acceleration(
+        &mut self,
+        sim: &Sim,
+        gradients: &PairGradients,
+    ) -> Result<(), StepError> {
+        let Some(particles) = sph_core::world::Particles::of(&sim.world) else {
+            return Ok(());
+        };
+        let (p, rho) = (
+            particles.joined::<Pressure>()?,
+            particles.joined::<Density>()?,
+        );
+        let (p, rho) = (p.view(), rho.view());
+        self.joint_q.clear();
+        self.joint_q.extend(
+            (p.fluid.iter().zip(rho.fluid))
+                .chain(p.ghost.iter().zip(rho.ghost))
+                .map(|(p, r)| p.0 / (r.0 * r.0)),
+        );
+        let joint = &self.joint_q;
+        let nb = neighbours(sim, self.acc.len())?;
+        self.acc.par_iter_mut().enumerate().for_each(|(i, a)| {
+            let qi = joint[i];
+            *a = gradients
+                .row(i)
+                .iter()
+                .zip(nb.of(i))
+                .fold(DVec2::ZERO, |s, (g, &j)| s - (qi + joint[j as usize]) * *g);
+        });
+        Ok(())
     }
 
     /// v = v0 + dt a_p for the fluid, and the mirror of the change for the ghosts.
@@ -298,17 +354,17 @@ impl Jacobi {
     }
 }
 
-/// The records the solve's passes read: continuity's (velocities) and the pressure
-/// gradient's (p / rho^2), with the geometry, densities and masses; packed as the
-/// momentum pass's 64-byte record, the sound speed filling the eighth place, because
-/// the pair loop has a build for that layout (whole-record loads, offsets known when
-/// compiled).
-const SOLVE_FIELDS: Fields = Fields::of(&Field::MOMENTUM);
-const _: () = assert!(
-    SOLVE_FIELDS.bits() & <Continuity as Term>::READS.bits() == <Continuity as Term>::READS.bits()
-        && SOLVE_FIELDS.bits() & <PressureGradient as Term>::READS.bits()
-            == <PressureGradient as Term>::READS.bits()
-);
+/// The neighbour lists, checked to cover `n` fluid particles.
+fn neighbours(sim: &Sim, n: usize) -> Result<&Neighbours, StepError> {
+    match sim.resources.get::<Neighbours>() {
+        Some(nb) if nb.n_fluid == n => Ok(nb),
+        Some(nb) => Err(StepError::Internal(format!(
+            "the neighbour lists cover {} fluid particles but the solve holds {n}",
+            nb.n_fluid
+        ))),
+        None => Err(StepError::Internal("no neighbour lists".into())),
+    }
+}
 
 /// Particle i's density error r_i (see the module docs) for density `rho` and
 /// D rho/Dt `rate`.
@@ -374,59 +430,6 @@ pub(crate) fn sync_ghost_pressures(sim: &Sim, offsets: &[f64]) -> Result<(), Ste
             let s = source[k].source as usize;
             p.0 = (fp[s].0 + offsets[k]).max(0.0);
         });
-    Ok(())
-}
-
-/// Runs `term` over every fluid particle's neighbours (records packed with `fields`)
-/// and stores `pick` of each particle's sum in `out`.
-pub(crate) fn each<T: PairTerm, O: Send>(
-    sim: &mut Sim,
-    term: &T,
-    fields: Fields,
-    out: &mut [O],
-    pick: impl Fn(T::Out) -> O + Sync,
-) -> Result<(), StepError> {
-    each_packed(sim, term, Packing::Full(fields), out, pick)
-}
-
-/// [`each`] with the records as `packing` says.
-fn each_packed<T: PairTerm, O: Send>(
-    sim: &mut Sim,
-    term: &T,
-    packing: Packing,
-    out: &mut [O],
-    pick: impl Fn(T::Out) -> O + Sync,
-) -> Result<(), StepError> {
-    let body = |sim: &Sim, _: &sph_core::world::Particles, records: &sph_core::pair::Records| {
-        let Some(nb) = sim.resources.get::<Neighbours>() else {
-            return Err(StepError::Internal("no neighbour lists".into()));
-        };
-        if nb.n_fluid != out.len() {
-            return Err(StepError::Internal(format!(
-                "the neighbour lists cover {} fluid particles but the world holds {}",
-                nb.n_fluid,
-                out.len()
-            )));
-        }
-        let c = &sim.constants;
-        with_kernel!(c.kernel, c.h, |k| run(term, k, records, nb, out, &pick))
-    };
-    with_records_packed(sim, packing, body)?;
-    Ok(())
-}
-
-fn run<T: PairTerm, K: Kernel, O: Send>(
-    term: &T,
-    k: K,
-    records: &sph_core::pair::Records,
-    nb: &Neighbours,
-    out: &mut [O],
-    pick: &(impl Fn(T::Out) -> O + Sync),
-) -> Result<(), StepError> {
-    let pass = Pass::new(term, k, records).map_err(|e| StepError::Internal(e.to_string()))?;
-    out.par_iter_mut()
-        .enumerate()
-        .for_each(|(i, o)| *o = pick(pass.sum(i, nb.of(i))));
     Ok(())
 }
 
@@ -629,7 +632,187 @@ impl Report {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use sph_core::components::{Mass, Position};
     use sph_core::kernel::{KernelKind, Wendland};
+    use sph_core::stage::Stage;
+
+    /// A corner of a closed 0.2 m box holding a jittered 7 x 5 block of fluid (spacing
+    /// 0.01 m, so near the floor and the left wall: single and double mirror images),
+    /// with pseudo-random velocities and pressures, after `GhostWalls`, `NeighbourGrid`
+    /// and `DfsphFactor` have run as in a DFSPH step.
+    fn factored() -> Sim {
+        let mut world = hecs::World::new();
+        crate::testing::closed_box(&mut world, 0.2, 0.2);
+        let mut seed = 7u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for a in 0..7 {
+            for b in 0..5 {
+                let x = DVec2::new(0.005 + 0.01 * a as f64, 0.005 + 0.01 * b as f64)
+                    + 0.002 * DVec2::new(next(), next());
+                world.spawn((
+                    Fluid,
+                    Position(x),
+                    Velocity(DVec2::new(next(), next())),
+                    Density(1000.0),
+                    Pressure(0.0),
+                    Mass(0.1),
+                ));
+            }
+        }
+        let mut sim = crate::testing::sim(world);
+        let registry = crate::standard_registry();
+        // The summation density alone: no continuity floor.
+        let pipeline = [
+            ("ghost_walls", "()"),
+            ("neighbour_grid", "()"),
+            ("dfsph_factor", "(continuity_floor: false)"),
+        ];
+        let mut stages: Vec<Box<dyn Stage>> = pipeline
+            .iter()
+            .map(|(name, params)| {
+                let mut de = ron::Deserializer::from_str(params).unwrap();
+                let mut erased = <dyn erased_serde::Deserializer>::erase(&mut de);
+                registry.build(name, &mut erased).unwrap().unwrap().stage
+            })
+            .collect();
+        for stage in &mut stages {
+            stage.setup(&mut sim).unwrap();
+        }
+        // Pressures after the factor's setup (which starts them hydrostatic).
+        let fluid = archetype::<Fluid>(&sim.world).unwrap();
+        for p in column_mut::<Pressure>(fluid).unwrap().iter_mut() {
+            p.0 = 1000.0 * (next() + 0.5);
+        }
+        for stage in &mut stages {
+            stage.run(&mut sim).unwrap();
+        }
+        sync_ghost_pressures(
+            &sim,
+            &sim.resources.get::<DfsphFactors>().unwrap().ghost_offset,
+        )
+        .unwrap();
+        sim
+    }
+
+    /// Every particle of the world, fluid then ghosts: position, velocity, mass, density,
+    /// pressure.
+    fn everyone(sim: &Sim) -> Vec<(DVec2, DVec2, f64, f64, f64)> {
+        let mut all = Vec::new();
+        for a in [
+            archetype::<Fluid>(&sim.world),
+            archetype::<Ghost>(&sim.world),
+        ]
+        .into_iter()
+        .flatten()
+        {
+            let (x, v, m) = (
+                column::<Position>(a).unwrap(),
+                column::<Velocity>(a).unwrap(),
+                column::<Mass>(a).unwrap(),
+            );
+            let (rho, p) = (
+                column::<Density>(a).unwrap(),
+                column::<Pressure>(a).unwrap(),
+            );
+            for k in 0..x.len() {
+                all.push((x[k].0, v[k].0, m[k].0, rho[k].0, p[k].0));
+            }
+        }
+        all
+    }
+
+    /// The factor stage's densities, factors and pair gradients, and the solve's two
+    /// passes over those gradients, equal the formulas summed by brute force over
+    /// every particle within the support (not the neighbour lists):
+    ///   rho_i = m_i W(0) + sum_j m_j W_ij,
+    ///   alpha_i = rho_i^2 / (|sum_j m_j grad W_ij|^2 + sum_j |m_j grad W_ij|^2),
+    ///   D rho_i/Dt = sum_j m_j v_ij . grad W_ij,
+    ///   a_p,i = - sum_j m_j (p_i/rho_i^2 + p_j/rho_j^2) grad W_ij.
+    /// To round-off (1e-12 relative: the same sums in another order).
+    #[test]
+    fn the_factor_and_the_solve_s_passes_sum_what_the_formulas_write() {
+        let mut sim = factored();
+        let all = everyone(&sim);
+        let n = archetype::<Fluid>(&sim.world).unwrap().len() as usize;
+        assert!(
+            all.len() > n + 20,
+            "the corner has ghosts: {} of {}",
+            all.len() - n,
+            all.len()
+        );
+        let kernel = Wendland::new(sim.constants.h);
+        let support = kernel.support();
+        let factors = sim.resources.take::<DfsphFactors>().unwrap();
+        let mut jacobi = Jacobi {
+            rate: vec![0.0; n],
+            acc: vec![DVec2::ZERO; n],
+            ..Default::default()
+        };
+        jacobi.divergence(&sim, &factors.gradients).unwrap();
+        jacobi
+            .pressure_acceleration(&sim, &factors.gradients)
+            .unwrap();
+        let nb = sim.resources.get::<Neighbours>().unwrap();
+        assert!(factors.gradients.fits(nb));
+        let close = |a: f64, b: f64, scale: f64| (a - b).abs() <= 1e-12 * scale;
+        for i in 0..n {
+            let (xi, vi, mi, rhoi, pi) = all[i];
+            let (mut rho, mut sum, mut s2, mut rate, mut acc) =
+                (mi * kernel.w(0.0), DVec2::ZERO, 0.0, 0.0, DVec2::ZERO);
+            let (mut pairs, mut scale) = (0, 0.0f64);
+            for (j, &(xj, vj, mj, rhoj, pj)) in all.iter().enumerate() {
+                let d = xi - xj;
+                let r = d.length();
+                if j == i || r >= support {
+                    continue;
+                }
+                let g = mj * kernel.grad(d, r);
+                rho += mj * kernel.w(r);
+                sum += g;
+                s2 += g.length_squared();
+                rate += (vi - vj).dot(g);
+                acc -= (pi / (rhoi * rhoi) + pj / (rhoj * rhoj)) * g;
+                pairs += 1;
+                scale = scale.max(g.length());
+            }
+            let alpha = rho * rho / (sum.length_squared() + s2);
+            let row = factors.gradients.row(i);
+            assert_eq!(
+                row.iter().filter(|g| **g != DVec2::ZERO).count(),
+                pairs,
+                "particle {i}: pairs"
+            );
+            // The factor stage wrote rho_i into the column.
+            assert!(
+                close(all[i].3, rho, rho),
+                "particle {i}: rho {} against {rho}",
+                all[i].3
+            );
+            assert!(
+                close(factors.alpha[i], alpha, alpha),
+                "particle {i}: alpha {} against {alpha}",
+                factors.alpha[i]
+            );
+            let vscale = scale * pairs as f64 * 2.0;
+            assert!(
+                close(jacobi.rate[i], rate, vscale),
+                "particle {i}: D rho/Dt {} against {rate}",
+                jacobi.rate[i]
+            );
+            let pscale = vscale * 2.0e-3;
+            assert!(
+                close(jacobi.acc[i].x, acc.x, pscale) && close(jacobi.acc[i].y, acc.y, pscale),
+                "particle {i}: a_p {} against {acc}",
+                jacobi.acc[i]
+            );
+        }
+        sim.resources.insert(factors);
+    }
 
     /// lambda_max of D^-1 A by power iteration on a periodic n x n lattice (ds = 1,
     /// m = rho = dt = 1), applying the solve's operator pair by pair as the module docs

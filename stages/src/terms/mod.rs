@@ -14,7 +14,6 @@ pub mod artificial_pressure;
 pub mod artificial_viscosity;
 pub mod continuity;
 pub mod delta_sph;
-pub mod dfsph_factor;
 pub mod diffusion;
 pub mod fourtakas;
 pub mod free_surface_density;

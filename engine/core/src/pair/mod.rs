@@ -85,6 +85,26 @@ impl Layouts {
         }
     }
 
+    /// The field set to pack for a pass that reads `reads`: the smallest compiled
+    /// layout that holds them (the density filters', the momentum record, then the
+    /// momentum record with a vector column), so
+    /// that the pass runs a loop with offsets known when compiled (an artificial
+    /// viscosity alone, say, reads the momentum record less p / rho^2; packing the one
+    /// field more costs far less than finding the offsets at run time); `reads` with
+    /// the geometry where no layout holds them.
+    pub const fn widen(reads: Fields) -> Fields {
+        let bits = reads.with(Fields::GEOMETRY).bits();
+        if bits & !Self::FILTER_BITS == 0 {
+            Fields(Self::FILTER_BITS)
+        } else if bits & !Self::MOMENTUM_BITS == 0 {
+            Fields(Self::MOMENTUM_BITS)
+        } else if bits & !Self::GRADIENT_BITS == 0 {
+            Fields(Self::GRADIENT_BITS)
+        } else {
+            Fields(bits)
+        }
+    }
+
     /// Both sets.
     pub const fn with(self, other: Layouts) -> Layouts {
         Layouts(self.0 | other.0)
@@ -514,7 +534,9 @@ pub fn with_records_packed<R>(
     let eos = &sim.constants.eos;
     let result = match crate::world::Particles::of(&sim.world) {
         Some(particles) => match packing {
-            Packing::Full(fields) => records.pack_with(&particles, fields, eos, columns),
+            Packing::Full(fields) => {
+                records.pack_with(&particles, Layouts::widen(fields), eos, columns)
+            }
             Packing::Refresh(changed) => records.refresh(&particles, changed, eos),
         }
         .and_then(|()| f(sim, &particles, &records))
