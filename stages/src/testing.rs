@@ -4,6 +4,7 @@ use glam::DVec2;
 use sph_core::components::Wall;
 use sph_core::kernel::KernelKind;
 use sph_core::sim::{Clock, Constants, Resources, Sim, Tait};
+use sph_core::stage::Stage;
 
 /// A sim over `world`: water (rho_0 1000 kg/m^3, c_0 20 m/s, Tait 7) under vertical
 /// gravity, spacing 0.01 m, h 0.013 m (Wendland).
@@ -42,4 +43,22 @@ pub(crate) fn closed_box(world: &mut hecs::World, width: f64, height: f64) {
         let now = rest.at_rest();
         world.spawn((rest, now));
     }
+}
+
+/// The standard stages `(name, RON parameters)`, built as a scenario would build them
+/// and set up on `sim` in order.
+pub(crate) fn pipeline(sim: &mut Sim, stages: &[(&str, &str)]) -> Vec<Box<dyn Stage>> {
+    let registry = crate::standard_registry();
+    let mut built: Vec<Box<dyn Stage>> = stages
+        .iter()
+        .map(|(name, params)| {
+            let mut de = ron::Deserializer::from_str(params).unwrap();
+            let mut erased = <dyn erased_serde::Deserializer>::erase(&mut de);
+            registry.build(name, &mut erased).unwrap().unwrap().stage
+        })
+        .collect();
+    for stage in &mut built {
+        stage.setup(sim).unwrap();
+    }
+    built
 }

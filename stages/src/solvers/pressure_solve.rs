@@ -634,7 +634,6 @@ mod tests {
     use super::*;
     use sph_core::components::{Mass, Position};
     use sph_core::kernel::{KernelKind, Wendland};
-    use sph_core::stage::Stage;
 
     /// A corner of a closed 0.2 m box holding a jittered 7 x 5 block of fluid (spacing
     /// 0.01 m, so near the floor and the left wall: single and double mirror images),
@@ -665,24 +664,15 @@ mod tests {
             }
         }
         let mut sim = crate::testing::sim(world);
-        let registry = crate::standard_registry();
         // The summation density alone: no continuity floor.
-        let pipeline = [
-            ("ghost_walls", "()"),
-            ("neighbour_grid", "()"),
-            ("dfsph_factor", "(continuity_floor: false)"),
-        ];
-        let mut stages: Vec<Box<dyn Stage>> = pipeline
-            .iter()
-            .map(|(name, params)| {
-                let mut de = ron::Deserializer::from_str(params).unwrap();
-                let mut erased = <dyn erased_serde::Deserializer>::erase(&mut de);
-                registry.build(name, &mut erased).unwrap().unwrap().stage
-            })
-            .collect();
-        for stage in &mut stages {
-            stage.setup(&mut sim).unwrap();
-        }
+        let mut stages = crate::testing::pipeline(
+            &mut sim,
+            &[
+                ("ghost_walls", "()"),
+                ("neighbour_grid", "()"),
+                ("dfsph_factor", "(continuity_floor: false)"),
+            ],
+        );
         // Pressures after the factor's setup (which starts them hydrostatic).
         let fluid = archetype::<Fluid>(&sim.world).unwrap();
         for p in column_mut::<Pressure>(fluid).unwrap().iter_mut() {

@@ -331,6 +331,48 @@ fn delta_sph_vanishes_on_a_linear_field_also_at_the_surface() {
     }
 }
 
+/// Where the density is not linear, delta-SPH's D_i is its formula (the head of
+/// delta_sph.rs) summed by a plain loop with the renormalised gradients:
+///   D_i = delta h c_0 sum_j 2 [(rho_j - rho_i) - (G_i + G_j) . x_ji / 2]
+///         (x_ji . grad_i W_ij) / (r_ij^2 + eta^2) V_j,
+/// to round-off (1e-12). On rho = rho_0 + b (x - x_c)^4 at the centre, each pair's
+/// bracket is the trapezoid rule's error, -b dx^4 to leading order, so D_i is
+/// negative: the flux takes density from the centre's neighbourhood, and its sign and
+/// size are checked, not only its vanishing on linear fields (above).
+#[test]
+fn delta_sph_sums_its_flux_where_the_density_is_not_linear() {
+    let b = 4.0e6; // kg/m^3 per m^4: 0.04 kg/m^3 one spacing out, 1.8 at the support's edge
+    let centre = DVec2::new(10.0, 10.0) * DS;
+    let world = lattice(21, 21, |x| RHO0 + b * (x.x - centre.x).powi(4));
+    let grads = gradients(&world);
+    let i = 10 * 21 + 10;
+    let p = Params { delta: 0.1 };
+    let d = diffusion_of(DeltaSph::build(&p, &constants()), &world, i);
+    let s = states(&world);
+    let k = Wendland::new(H);
+    let (xi, _, rhoi, _, _) = s[i];
+    let mut plain = 0.0;
+    for (j, &(xj, _, rhoj, mj, _)) in s.iter().enumerate() {
+        let x_ji = xj - xi;
+        let r = x_ji.length();
+        if j == i || r >= k.support() {
+            continue;
+        }
+        let bracket = (rhoj - rhoi) - 0.5 * (grads[i] + grads[j]).dot(x_ji);
+        let x_grad = x_ji.dot(k.grad(xi - xj, r));
+        plain += 2.0 * bracket * x_grad / (r * r + 0.01 * H * H) * mj / rhoj;
+    }
+    plain *= 0.1 * H * C0;
+    assert!(
+        plain < 0.0,
+        "the plain loop's D_i {plain:e} is not negative"
+    );
+    assert!(
+        (d - plain).abs() < 1e-12 * plain.abs(),
+        "delta-SPH D_i = {d:e}, plain loop {plain:e}"
+    );
+}
+
 /// With walls that do not slip, the viscous terms read each ghost's no-slip velocity
 /// (the `NoSlipVelocity` column) and continuity its `Velocity`: on every instruction set the
 /// sums equal, to round-off, the plain terms' on the same lattice with the ghosts'
@@ -618,6 +660,24 @@ fn the_artificial_viscosity_exposes_its_coefficients() {
             beta: 1.5
         })
     );
+}
+
+/// delta-SPH declares the density gradients its pre-pass writes, so that a later stage
+/// reading them passes the pipeline's contract check (and a second writer is refused).
+#[test]
+fn delta_sph_declares_the_gradients_it_writes() {
+    use crate::vocab::{DensityGradient, GradientUnrenormalised};
+    use sph_core::contract::{check, Access, Breach};
+    let declared = <DeltaSph as Term>::declare(&Params { delta: 0.1 }, Access::new());
+    let reader = Access::new()
+        .reads::<DensityGradient>()
+        .reads::<GradientUnrenormalised>();
+    let clock = Access::new().writes::<sph_core::sim::Clock>();
+    assert_eq!(check([(&declared, 1), (&reader, 1), (&clock, 1)]), Ok(()));
+    assert!(matches!(
+        check([(&declared, 1), (&declared, 1), (&clock, 1)]),
+        Err(Breach::TwoWriters { .. })
+    ));
 }
 
 /// The standard terms written out as plain loops over the pairs from the formulas at

@@ -82,6 +82,11 @@ pub struct Params {
     /// 2017), as a mirrored ghost has it, on a fixed lattice whose push does not
     /// vanish at the wall. Not with `separation`. Default false.
     pub mirror: bool,
+    /// Raise each wall particle's pressure to at least minus the lowest fluid pressure
+    /// within its support, so that p_f + p_w >= 0 in every fluid-wall pair: the wall
+    /// never pulls a fluid particle in, even one in tension (a contact that carries no
+    /// tension). Default false.
+    pub no_pull: bool,
 }
 
 pub fn register(registry: &mut StageRegistry) {
@@ -101,6 +106,7 @@ pub fn register(registry: &mut StageRegistry) {
                 separation: p.separation,
                 one_sided: p.one_sided,
                 mirror: p.mirror,
+                no_pull: p.no_pull,
                 sums: Vec::new(),
                 pull: Vec::new(),
             })
@@ -108,8 +114,9 @@ pub fn register(registry: &mut StageRegistry) {
     );
 }
 
-/// Per wall particle: sum W, sum p W, sum rho (x_w - x_f) W, sum v W, and with
-/// `one_sided` sum max(0, (g - a_w) . rho (x_w - x_f)) W.
+/// Per wall particle: sum W, sum p W, sum rho (x_w - x_f) W, sum v W, with
+/// `one_sided` sum max(0, (g - a_w) . rho (x_w - x_f)) W, and the largest tension
+/// max(0, -p_f) of the fluid within the support.
 #[derive(Clone, Copy, Default)]
 struct Sums {
     w: f64,
@@ -117,6 +124,7 @@ struct Sums {
     rho_r: DVec2,
     vw: DVec2,
     raised: f64,
+    tension: f64,
 }
 
 pub struct WallPressure {
@@ -124,6 +132,7 @@ pub struct WallPressure {
     separation: bool,
     one_sided: bool,
     mirror: bool,
+    no_pull: bool,
     sums: Vec<Sums>,
     /// g - a_w per ghost, for the one-sided sums (zero elsewhere); kept between
     /// steps only to reuse its allocation.
@@ -236,6 +245,7 @@ impl Stage for WallPressure {
                     s.rho_r += fr[i].0 * w * r;
                     s.vw += w * fv[i].0;
                     s.raised += (pull[g].dot(r) * fr[i].0).max(0.0) * w;
+                    s.tension = s.tension.max(-fp[i].0);
                 }
             }
         });
@@ -262,6 +272,9 @@ impl Stage for WallPressure {
                     true => (s.pw + s.raised) / s.w,
                     false => (s.pw + (gravity - wall.body.acceleration_at(x)).dot(s.rho_r)) / s.w,
                 };
+                if self.no_pull {
+                    gp[k].0 = gp[k].0.max(s.tension);
+                }
                 let (v_b, u) = (wall.body.velocity_at(x), s.vw / s.w);
                 viscous[k] = match self.slip {
                     Slip::FreeSlip => v_b + (u - v_b).dot(wall.tangent()) * wall.tangent(),
@@ -302,5 +315,80 @@ impl Stage for WallPressure {
             .updates::<Ghost>()
             .writes::<NoSlipVelocity>()
             .writes::<NoSlipSigns>()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use sph_core::components::Mass;
+
+    /// A closed 0.2 m box lined with wall particles, and a row of five fluid particles
+    /// 0.005 m above its floor, the middle one in tension (-500 Pa) and the others at
+    /// +100 Pa, after `WallPressure(one_sided: true, no_pull: ...)`: the wall particles'
+    /// pressures, with each one's distance from the particle in tension.
+    fn floor_pressures(no_pull: bool) -> Vec<(f64, f64)> {
+        let mut world = hecs::World::new();
+        crate::testing::closed_box(&mut world, 0.2, 0.2);
+        for k in 0..5 {
+            let p = if k == 2 { -500.0 } else { 100.0 };
+            world.spawn((
+                Fluid,
+                Position(DVec2::new(0.08 + 0.01 * k as f64, 0.005)),
+                Velocity(DVec2::ZERO),
+                Density(1000.0),
+                Pressure(p),
+                Mass(0.1),
+            ));
+        }
+        let mut sim = crate::testing::sim(world);
+        let params = format!("(one_sided: true, no_pull: {no_pull})");
+        let mut stages = crate::testing::pipeline(
+            &mut sim,
+            &[
+                ("wall_particles", "()"),
+                ("neighbour_grid", "()"),
+                ("wall_pressure", &params),
+            ],
+        );
+        for stage in &mut stages {
+            stage.run(&mut sim).unwrap();
+        }
+        let ghost = archetype::<Ghost>(&sim.world).unwrap();
+        let (x, p) = (
+            column::<Position>(ghost).unwrap(),
+            column::<Pressure>(ghost).unwrap(),
+        );
+        let tense = DVec2::new(0.1, 0.005);
+        x.iter()
+            .zip(p.iter())
+            .map(|(x, p)| ((x.0 - tense).length(), p.0))
+            .collect()
+    }
+
+    /// With `no_pull` every wall particle within the support of the particle in tension
+    /// pushes it at least as hard as it pulls (p_w >= 500 Pa, so p_f + p_w >= 0);
+    /// without it, the wall's extrapolated pressure there is below that (the Shepard
+    /// mean of -500 and +100 Pa), so the wall pulls. The wall particles beyond every
+    /// fluid particle's reach keep p = 0 either way.
+    #[test]
+    fn a_wall_that_does_not_pull_holds_no_fluid_in_tension() {
+        let support = crate::testing::sim(hecs::World::new()).constants.support();
+        let (held, pulled) = (floor_pressures(true), floor_pressures(false));
+        let near: Vec<_> = held.iter().filter(|(d, _)| *d < support).collect();
+        assert!(
+            near.len() >= 4,
+            "wall particles near the tension: {}",
+            near.len()
+        );
+        for (d, p) in &near {
+            assert!(*p >= 500.0, "a wall particle {d:.4} m away at {p:.1} Pa");
+        }
+        assert!(
+            pulled.iter().any(|(d, p)| *d < support && *p < 0.0),
+            "without no_pull the wall beside the tension reads below zero"
+        );
+        let far = |v: &[(f64, f64)]| v.iter().filter(|(d, _)| *d > 0.1).all(|(_, p)| *p == 0.0);
+        assert!(far(&held) && far(&pulled));
     }
 }
