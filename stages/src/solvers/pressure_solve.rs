@@ -266,6 +266,19 @@ impl Jacobi {
         }
     }
 
+    /// The pressure acceleration of every fluid particle at the pressures the
+    /// `Pressure` column holds now, the ghosts' set from their sources' first (as the
+    /// density solve carries them): a step's start-up estimate, before a solve.
+    pub(crate) fn acceleration_now(&mut self, sim: &mut Sim) -> Result<&[DVec2], StepError> {
+        let factors = sim.resources.take::<DfsphFactors>().unwrap_or_default();
+        self.acc.clear();
+        self.acc.resize(factors.alpha.len(), DVec2::ZERO);
+        let done = sync_ghost_pressures(sim, &factors.ghost_offset)
+            .and_then(|()| self.pressure_acceleration(sim, &factors.gradients));
+        sim.resources.insert(factors);
+        done.map(|()| &self.acc[..])
+    }
+
     /// D rho/Dt = sum_j m_j v_ij . grad_i W_ij of every fluid particle (the
     /// `Continuity` term) from the velocities in the columns.
     fn divergence(&mut self, sim: &Sim, gradients: &PairGradients) -> Result<(), StepError> {
