@@ -169,24 +169,10 @@ impl Stage for DensitySolve {
     }
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
-        if archetype::<Fluid>(&sim.world).is_none() {
-            return Ok(());
-        }
         // The start's acceleration, for the first step (`Params::growth`).
         let start = match sim.clock.dt > 0.0 {
             true => 0.0,
-            false => {
-                let a_p = self.jacobi.acceleration_now(sim)?;
-                let fluid = archetype::<Fluid>(&sim.world).ok_or_else(|| {
-                    StepError::Internal("the fluid went during the density solve".into())
-                })?;
-                let a = column::<Acceleration>(fluid)?;
-                a.par_iter()
-                    .zip(a_p.par_iter())
-                    .map(|(a, p)| (a.0 + *p).length())
-                    // (A non-finite state stops the run in the solve below.)
-                    .reduce(|| 0.0, f64::max)
-            }
+            false => self.start_acceleration(sim)?,
         };
         let Some(fluid) = archetype::<Fluid>(&sim.world) else {
             return Ok(());
@@ -281,6 +267,21 @@ impl Stage for DensitySolve {
 }
 
 impl DensitySolve {
+    /// The largest |a_np + a_p| of the fluid at the step's start: the non-pressure
+    /// acceleration `Forces` wrote and the gradient of the pressures the column holds
+    /// (0 without fluid). A non-finite state is left to stop the run in the solve.
+    fn start_acceleration(&mut self, sim: &mut Sim) -> Result<f64, StepError> {
+        let a_p = self.jacobi.acceleration_now(sim)?;
+        let Some(fluid) = archetype::<Fluid>(&sim.world) else {
+            return Ok(0.0);
+        };
+        let a = column::<Acceleration>(fluid)?;
+        Ok(a.par_iter()
+            .zip(a_p.par_iter())
+            .map(|(a, p)| (a.0 + *p).length())
+            .reduce(|| 0.0, f64::max))
+    }
+
     /// The CFL step for the largest speed `max_v`, capped, ramped up from the start
     /// (whose largest acceleration is `start`), landing on the end time; an error if
     /// it collapsed.

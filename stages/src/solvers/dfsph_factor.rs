@@ -129,10 +129,9 @@ impl Stage for DfsphFactor {
 
     fn run(&mut self, sim: &mut Sim) -> Result<(), StepError> {
         let _span = tracing::trace_span!("pair_sums").entered();
-        let Some(fluid) = archetype::<Fluid>(&sim.world) else {
+        if archetype::<Fluid>(&sim.world).is_none() {
             return Ok(());
-        };
-        self.out.resize(fluid.len() as usize, (0.0, 0.0));
+        }
         // The resource keeps its buffers from step to step; it goes back on every path.
         let mut factors = sim.resources.take::<DfsphFactors>().unwrap_or_default();
         let result = self

@@ -210,9 +210,7 @@ impl Jacobi {
                 .for_each(|p| p.0 *= warm);
         }
         sync_ghost_pressures(sim, offsets)?;
-        // Every pass of the solve reads these records; positions, densities and
-        // masses stay as they are through the solve, so each pass packs again only
-        // the velocities or the pressures that the iterations change.
+        // Every pass sums over the step's pair gradients: they must be this step's.
         let Some(nb) = sim.resources.get::<Neighbours>() else {
             return Err(StepError::Internal("no neighbour lists".into()));
         };
@@ -290,15 +288,9 @@ impl Jacobi {
         self.joint_v.clear();
         self.joint_v
             .extend(v.fluid.iter().chain(v.ghost).map(|v| v.0));
-        let joint = &self.joint_v;
         let nb = neighbours(sim, self.rate.len())?;
-        self.rate.par_iter_mut().enumerate().for_each(|(i, r)| {
-            let vi = joint[i];
-            *r = gradients
-                .row(i)
-                .iter()
-                .zip(nb.of(i))
-                .fold(0.0, |s, (g, &j)| s + (vi - joint[j as usize]).dot(*g));
+        over_pairs(nb, gradients, &self.joint_v, &mut self.rate, |vi, vj, g| {
+            (vi - vj).dot(g)
         });
         Ok(())
     }
@@ -324,15 +316,9 @@ impl Jacobi {
                 .chain(p.ghost.iter().zip(rho.ghost))
                 .map(|(p, r)| p.0 / (r.0 * r.0)),
         );
-        let joint = &self.joint_q;
         let nb = neighbours(sim, self.acc.len())?;
-        self.acc.par_iter_mut().enumerate().for_each(|(i, a)| {
-            let qi = joint[i];
-            *a = gradients
-                .row(i)
-                .iter()
-                .zip(nb.of(i))
-                .fold(DVec2::ZERO, |s, (g, &j)| s - (qi + joint[j as usize]) * *g);
+        over_pairs(nb, gradients, &self.joint_q, &mut self.acc, |qi, qj, g| {
+            -(qi + qj) * g
         });
         Ok(())
     }
@@ -365,6 +351,27 @@ impl Jacobi {
             });
         Ok(())
     }
+}
+
+/// out_i = sum_j pair(x_i, x_j, m_j grad_i W_ij) over fluid particle i's listed pairs
+/// in list order, x the joint (fluid, then ghost) values.
+fn over_pairs<X: Copy + Sync, O: Send + Default + std::ops::Add<Output = O>>(
+    nb: &Neighbours,
+    gradients: &PairGradients,
+    joint: &[X],
+    out: &mut [O],
+    pair: impl Fn(X, X, DVec2) -> O + Sync,
+) {
+    out.par_iter_mut().enumerate().for_each(|(i, o)| {
+        let xi = joint[i];
+        *o = gradients
+            .row(i)
+            .iter()
+            .zip(nb.of(i))
+            .fold(O::default(), |s, (g, &j)| {
+                s + pair(xi, joint[j as usize], *g)
+            });
+    });
 }
 
 /// The neighbour lists, checked to cover `n` fluid particles.

@@ -87,11 +87,11 @@ impl Layouts {
 
     /// The field set to pack for a pass that reads `reads`: the smallest compiled
     /// layout that holds them (the density filters', the momentum record, then the
-    /// momentum record with a vector column), so
-    /// that the pass runs a loop with offsets known when compiled (an artificial
-    /// viscosity alone, say, reads the momentum record less p / rho^2; packing the one
-    /// field more costs far less than finding the offsets at run time); `reads` with
-    /// the geometry where no layout holds them.
+    /// momentum record with a vector column), so that the pass runs a loop with
+    /// offsets known when compiled (an artificial viscosity alone, say, reads the
+    /// momentum record less p / rho^2; packing the one field more costs far less than
+    /// finding the offsets at run time); `reads` with the geometry where no layout
+    /// holds them.
     pub const fn widen(reads: Fields) -> Fields {
         let bits = reads.with(Fields::GEOMETRY).bits();
         if bits & !Self::FILTER_BITS == 0 {
