@@ -52,7 +52,8 @@ pub(crate) fn pipeline(sim: &mut Sim, stages: &[(&str, &str)]) -> Vec<Box<dyn St
     let mut built: Vec<Box<dyn Stage>> = stages
         .iter()
         .map(|(name, params)| {
-            let mut de = ron::Deserializer::from_str(params).unwrap();
+            let options = sph_core::registry::ron_options();
+            let mut de = ron::Deserializer::from_str_with_options(params, &options).unwrap();
             let mut erased = <dyn erased_serde::Deserializer>::erase(&mut de);
             registry.build(name, &mut erased).unwrap().unwrap().stage
         })

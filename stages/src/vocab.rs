@@ -50,6 +50,14 @@ impl DensityGradient {
     pub const FIELDS: Fields = Fields::of(Self::SLOTS);
 }
 
+/// Each fluid particle's sum_j m_j W_ij over its neighbours (fluid and ghosts, i
+/// excluded) [kg/m^2], in fluid order, at this step's positions: summed in the
+/// momentum stage's pass when a stage has asked for it (by inserting it), so that a
+/// density summation after that stage (`Reinitialise(sums: Forces)`) needs no pass of
+/// its own.
+#[derive(Debug, Default, Clone)]
+pub struct KernelSums(pub Vec<f64>);
+
 /// The rate at which a density-diffusion term changes the internal energy,
 /// sum_i m_i (p_i/rho_i^2) D_i, each step when a stage that reports energy has asked
 /// for it (by inserting it); filled in by the momentum stage whose terms include a

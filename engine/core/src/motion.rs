@@ -78,6 +78,22 @@ pub struct Pose {
     pub state: RigidState,
 }
 
+/// A [`Pose`]'s map from the tank frame to the world ([`Pose::placement`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Placement {
+    centre: DVec2,
+    pivot: DVec2,
+    /// (cos, sin) of the angle.
+    rotation: DVec2,
+}
+
+impl Placement {
+    /// A tank-frame point in the world.
+    pub fn to_world(&self, q: DVec2) -> DVec2 {
+        self.centre + self.rotation.rotate(q - self.pivot)
+    }
+}
+
 impl Pose {
     pub fn at_rest(pivot: DVec2) -> Self {
         Self {
@@ -91,7 +107,16 @@ impl Pose {
     }
     /// A tank-frame point in the world.
     pub fn to_world(&self, q: DVec2) -> DVec2 {
-        self.centre() + DVec2::from_angle(self.state.angle).rotate(q - self.pivot)
+        self.placement().to_world(q)
+    }
+    /// The map from the tank frame to the world, its rotation worked out once (for
+    /// placing many points).
+    pub fn placement(&self) -> Placement {
+        Placement {
+            centre: self.centre(),
+            pivot: self.pivot,
+            rotation: DVec2::from_angle(self.state.angle),
+        }
     }
     /// A world point in the tank frame.
     pub fn to_body(&self, x: DVec2) -> DVec2 {

@@ -60,7 +60,7 @@ impl Stage for ContinuityStage {
             wall: false,
             counts: false,
         };
-        rates::run(sim, &self.terms, out, &mut self.unused).map(|_| ())
+        rates::run(sim, &self.terms, out, &mut self.unused, None).map(|_| ())
     }
 
     fn access(&self) -> Access {

@@ -10,7 +10,7 @@ use crate::terms::{
     artificial_viscosity, plugin_terms, pressure_gradient, term_list_seed, PrePass, RateTerms,
     TermRegistry, TermSpec,
 };
-use crate::vocab::{DiffusionPower, NoSlipVelocity, ViscousDissipation, WallPower};
+use crate::vocab::{DiffusionPower, KernelSums, NoSlipVelocity, ViscousDissipation, WallPower};
 use serde::de::{self, DeserializeSeed, MapAccess, Visitor};
 use serde::{Deserializer, Serialize};
 use sph_core::components::{Acceleration, DensityRate, Fluid, NeighbourCount};
@@ -190,16 +190,36 @@ impl Stage for Forces {
         for pass in &self.pre_passes {
             pass(sim)?;
         }
+        // A density summation after this stage asked for the kernel sums.
+        let mut sums = sim
+            .resources
+            .get_mut::<KernelSums>()
+            .map(|s| std::mem::take(&mut s.0));
         let power = match self.plugins.is_empty() {
-            true => rates::run(sim, &self.terms, out, &mut self.chunk_power)?,
+            true => rates::run(sim, &self.terms, out, &mut self.chunk_power, sums.as_mut()),
             false => {
                 let terms = WithPlugins {
                     base: self.terms,
                     plugins: &self.plugins,
                 };
-                rates::run_set(sim, terms, out, &mut self.chunk_power)?
+                match sums.as_mut() {
+                    Some(sums) => {
+                        rates::run_set::<_, true>(sim, terms, out, &mut self.chunk_power, sums)
+                    }
+                    None => rates::run_set::<_, false>(
+                        sim,
+                        terms,
+                        out,
+                        &mut self.chunk_power,
+                        &mut Vec::new(),
+                    ),
+                }
             }
         };
+        if let (Some(sums), Some(kept)) = (sums, sim.resources.get_mut::<KernelSums>()) {
+            kept.0 = sums;
+        }
+        let power = power?;
         if let Some(d) = sim.resources.get_mut::<ViscousDissipation>() {
             d.power = power.viscous;
         }
@@ -230,6 +250,7 @@ impl Stage for Forces {
             .writes::<ViscousDissipation>()
             .writes::<DiffusionPower>()
             .writes::<WallPower>()
+            .writes::<KernelSums>()
             .uses::<NeighbourCount>()
             .uses::<NoSlipVelocity>();
         terms.iter().fold(access, |a, t| t.declare(a))

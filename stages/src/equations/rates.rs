@@ -65,11 +65,16 @@ pub(crate) struct Power {
 /// when asked (else 0). `chunk_power` keeps one partial sum per chunk of particles
 /// between steps; the chunks are added in order, so the totals are the same for any
 /// thread count.
+///
+/// With `kernel_sums` (a vector that is filled in, not appended to), the pass also
+/// sums m_j W_ij for each particle (`vocab::KernelSums`); only the Riemann set has a
+/// loop compiled for it, other sets run the generic loop then.
 pub(crate) fn run(
     sim: &mut Sim,
     terms: &RateTerms,
     out: Outputs,
     chunk_power: &mut Vec<Power>,
+    kernel_sums: Option<&mut Vec<f64>>,
 ) -> Result<Power, StepError> {
     use crate::terms::set_of as bits;
     use TermBit::*;
@@ -93,32 +98,39 @@ pub(crate) fn run(
     const PG_AV_AP_C_D: u16 = PG_AV_AP_C | bits(&[DeltaSph]);
     const PG_AV_C_D: u16 = PG_AV_C | bits(&[DeltaSph]);
     const RIEMANN: u16 = bits(&[RiemannPressure, Continuity, RiemannDiffusion]);
+    if let Some(sums) = kernel_sums {
+        return match Fixed::<RIEMANN>::of(terms) {
+            Some(set) if !generic_only() => run_set::<_, true>(sim, set, out, chunk_power, sums),
+            _ => run_set::<_, true>(sim, *terms, out, chunk_power, sums),
+        };
+    }
+    let none = &mut Vec::new();
     if generic_only() {
-        run_set(sim, *terms, out, chunk_power)
+        run_set::<_, false>(sim, *terms, out, chunk_power, none)
     } else if let Some(set) = Fixed::<PG_AV_AP_C>::of(terms) {
-        run_set(sim, set, out, chunk_power)
+        run_set::<_, false>(sim, set, out, chunk_power, none)
     } else if let Some(set) = Fixed::<RIEMANN>::of(terms) {
-        run_set(sim, set, out, chunk_power)
+        run_set::<_, false>(sim, set, out, chunk_power, none)
     } else if let Some(set) = Fixed::<PG_AV_AP_C_F>::of(terms) {
-        run_set(sim, set, out, chunk_power)
+        run_set::<_, false>(sim, set, out, chunk_power, none)
     } else if let Some(set) = Fixed::<PG_AV_C_F>::of(terms) {
-        run_set(sim, set, out, chunk_power)
+        run_set::<_, false>(sim, set, out, chunk_power, none)
     } else if let Some(set) = Fixed::<PG_AV_AP_C_MC>::of(terms) {
-        run_set(sim, set, out, chunk_power)
+        run_set::<_, false>(sim, set, out, chunk_power, none)
     } else if let Some(set) = Fixed::<PG_AV_C_MC>::of(terms) {
-        run_set(sim, set, out, chunk_power)
+        run_set::<_, false>(sim, set, out, chunk_power, none)
     } else if let Some(set) = Fixed::<PG_AV_AP_C_D>::of(terms) {
-        run_set(sim, set, out, chunk_power)
+        run_set::<_, false>(sim, set, out, chunk_power, none)
     } else if let Some(set) = Fixed::<PG_AV_C_D>::of(terms) {
-        run_set(sim, set, out, chunk_power)
+        run_set::<_, false>(sim, set, out, chunk_power, none)
     } else if let Some(set) = Fixed::<PG_AV_C>::of(terms) {
-        run_set(sim, set, out, chunk_power)
+        run_set::<_, false>(sim, set, out, chunk_power, none)
     } else if let Some(set) = Fixed::<PG_AV>::of(terms) {
-        run_set(sim, set, out, chunk_power)
+        run_set::<_, false>(sim, set, out, chunk_power, none)
     } else if let Some(set) = Fixed::<C>::of(terms) {
-        run_set(sim, set, out, chunk_power)
+        run_set::<_, false>(sim, set, out, chunk_power, none)
     } else {
-        run_set(sim, *terms, out, chunk_power)
+        run_set::<_, false>(sim, *terms, out, chunk_power, none)
     }
 }
 
@@ -130,22 +142,28 @@ fn generic_only() -> bool {
     *GENERIC.get_or_init(|| std::env::var_os("SPH_GENERIC_TERMS").is_some())
 }
 
-/// [`run`] for a term set `terms`.
-pub(crate) fn run_set<R: RateTerm + Copy>(
+/// [`run`] for a term set `terms`; with `KERNEL_SUM`, each fluid particle's
+/// sum_j m_j W_ij into `kernel_sums` (resized to the fluid).
+pub(crate) fn run_set<R: RateTerm + Copy, const KERNEL_SUM: bool>(
     sim: &mut Sim,
     terms: R,
     out: Outputs,
     chunk_power: &mut Vec<Power>,
+    kernel_sums: &mut Vec<f64>,
 ) -> Result<Power, StepError> {
     let power = with_records(sim, terms.reads(), |sim, particles, records| {
         let Some(nb) = sim.resources.get::<Neighbours>() else {
             return Ok(Power::default());
         };
         let n = nb.n_fluid;
-        let eom = Counted {
+        let eom = Counted::<_, KERNEL_SUM> {
             term: EquationsOfMotion(terms),
             radius: nb.support,
         };
+        kernel_sums.clear();
+        if KERNEL_SUM {
+            kernel_sums.resize(n, 0.0);
+        }
         let mut acc = match out.acceleration {
             true => Some(particles.fluid_mut::<Acceleration>()?),
             false => None,
@@ -195,49 +213,56 @@ pub(crate) fn run_set<R: RateTerm + Copy>(
             optional_pieces(acc, n, CHUNK)
                 .zip(optional_pieces(rate, n, CHUNK))
                 .zip(optional_pieces(counts, n, CHUNK))
+                .zip(optional_pieces(&mut kernel_sums[..], n, CHUNK))
                 .zip(optional_pieces(&mut chunk_power[..], chunks, 1))
                 .enumerate()
-                .for_each(|(c, (((mut acc, mut rate), mut counts), power))| {
-                    let mut sum = Power::default();
-                    for k in 0..(n - c * CHUNK).min(CHUNK) {
-                        let i = c * CHUNK + k;
-                        let list = nb.of(i);
-                        // The ghost neighbours, last in the list, summed apart (for the
-                        // walls' power; always, so that every rate stage adds a
-                        // particle's pairs in the same order).
-                        let ghosts = match list.last() {
-                            Some(&j) if j as usize >= n => {
-                                list.partition_point(|&j| (j as usize) < n)
+                .for_each(
+                    |(c, ((((mut acc, mut rate), mut counts), mut sums), power))| {
+                        let mut sum = Power::default();
+                        for k in 0..(n - c * CHUNK).min(CHUNK) {
+                            let i = c * CHUNK + k;
+                            let list = nb.of(i);
+                            // The ghost neighbours, last in the list, summed apart (for the
+                            // walls' power; always, so that every rate stage adds a
+                            // particle's pairs in the same order).
+                            let ghosts = match list.last() {
+                                Some(&j) if j as usize >= n => {
+                                    list.partition_point(|&j| (j as usize) < n)
+                                }
+                                _ => list.len(),
+                            };
+                            let (s, count, kernel) = if ghosts == list.len() {
+                                pass.sum(i, list)
+                            } else {
+                                let (f, cf, kf) = pass.sum(i, &list[..ghosts]);
+                                let (w, cw, kw) = pass.sum(i, &list[ghosts..]);
+                                if let Some((v, rho, m)) = state {
+                                    sum.wall += wall_work::particle_power(
+                                        &eos, m[i].0, v[i].0, rho[i].0, &w,
+                                    );
+                                }
+                                (f + w, cf + cw, kf + kw)
+                            };
+                            if let Some(k_sum) = sums.as_deref_mut() {
+                                k_sum[k] = kernel;
                             }
-                            _ => list.len(),
-                        };
-                        let (s, count) = if ghosts == list.len() {
-                            pass.sum(i, list)
-                        } else {
-                            let (f, cf) = pass.sum(i, &list[..ghosts]);
-                            let (w, cw) = pass.sum(i, &list[ghosts..]);
-                            if let Some((v, rho, m)) = state {
-                                sum.wall +=
-                                    wall_work::particle_power(&eos, m[i].0, v[i].0, rho[i].0, &w);
+                            if let Some(a) = acc.as_deref_mut() {
+                                a[k].0 = s.acc + g;
                             }
-                            (f + w, cf + cw)
-                        };
-                        if let Some(a) = acc.as_deref_mut() {
-                            a[k].0 = s.acc + g;
+                            if let Some(r) = rate.as_deref_mut() {
+                                r[k].0 = s.drho;
+                            }
+                            if let Some(n) = counts.as_deref_mut() {
+                                n[k].0 = count;
+                            }
+                            sum.viscous += s.power;
+                            sum.diffusion += s.diffusion;
                         }
-                        if let Some(r) = rate.as_deref_mut() {
-                            r[k].0 = s.drho;
+                        if let Some(p) = power {
+                            p[0] = sum;
                         }
-                        if let Some(n) = counts.as_deref_mut() {
-                            n[k].0 = count;
-                        }
-                        sum.viscous += s.power;
-                        sum.diffusion += s.diffusion;
-                    }
-                    if let Some(p) = power {
-                        p[0] = sum;
-                    }
-                });
+                    },
+                );
             Ok::<(), StepError>(())
         })?;
         Ok(chunk_power.iter().fold(Power::default(), |a, p| Power {

@@ -42,8 +42,16 @@ impl PairTerm for FreeSurfaceDensity {
     }
     #[inline(always)]
     fn finish<L: Lane>(&self, me: &Me, sum: L) -> f64 {
-        let (m, rho) = (me.get(Field::Mass), me.get(Field::Rho));
-        let summed = (m * self.w0 + sum.sum()) * self.inv_lattice_sum;
+        self.density(me.get(Field::Mass), me.get(Field::Rho), sum.sum())
+    }
+}
+
+impl FreeSurfaceDensity {
+    /// The corrected density of a particle of mass `m` and density `rho` whose
+    /// neighbours sum to `sum` = sum_j m_j W_ij (i excluded).
+    #[inline]
+    pub fn density(&self, m: f64, rho: f64, sum: f64) -> f64 {
+        let summed = (m * self.w0 + sum) * self.inv_lattice_sum;
         // `rho` is positive: the integrator stops a run whose density is not.
         summed + (rho - summed).max(0.0) * self.rho0 / rho
     }

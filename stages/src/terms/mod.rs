@@ -264,14 +264,16 @@ macro_rules! rate_terms {
         impl<const SET: u16> RateTerm for Fixed<SET> {
             const USES_COEF: bool =
                 false $(|| (SET & (1 << TermBit::$ty as u16) != 0 && <$module::$ty as RateTerm>::USES_COEF))*;
-            // The records are packed with the set's reads: one layout at most (none
-            // when a viscous term also reads the ghosts' no-slip velocities).
-            const LAYOUTS: Layouts = Layouts::of(
-                Fields::of(&[]) $(.with(match SET & (1 << TermBit::$ty as u16) {
+            // The records are packed with the set's reads, and with the walls'
+            // no-slip velocities when a viscous term reads them (wall particles, or
+            // mirrors that do not slip): a loop for each that is a compiled layout.
+            const LAYOUTS: Layouts = {
+                let reads = Fields::of(&[]) $(.with(match SET & (1 << TermBit::$ty as u16) {
                     0 => Fields::of(&[]),
                     _ => <$module::$ty as Term>::READS,
-                }))*
-            );
+                }))*;
+                Layouts::of(reads).with(Layouts::of(reads.with(NoSlipVelocity::FIELDS)))
+            };
             fn reads(&self) -> Fields {
                 let mut f = Fields::default();
                 $(if SET & (1 << TermBit::$ty as u16) != 0 {

@@ -73,6 +73,11 @@ pub(super) fn packed(world: &hecs::World, fields: sph_core::pair::Fields) -> Rec
             .insert::<DensityGradient>(Scope::Particles, gradients(world))
             .unwrap();
     }
+    if fields.contains(NoSlipVelocity::X) {
+        columns
+            .insert::<NoSlipVelocity>(NoSlipVelocity::SCOPE, no_slip_velocities(world))
+            .unwrap();
+    }
     r.pack_with(
         &Particles::of(world).unwrap(),
         fields,
@@ -81,6 +86,14 @@ pub(super) fn packed(world: &hecs::World, fields: sph_core::pair::Fields) -> Rec
     )
     .unwrap();
     r
+}
+
+/// A no-slip velocity for each ghost of `world`, in archetype order, unlike its own.
+pub(super) fn no_slip_velocities(world: &hecs::World) -> Vec<DVec2> {
+    let ghosts = world.query::<&Ghost>().iter().count();
+    (0..ghosts)
+        .map(|k| DVec2::new(0.3 - 0.05 * k as f64, 0.1 + 0.02 * k as f64))
+        .collect()
 }
 
 /// The renormalised density gradient of every particle (all-pairs neighbours; the
@@ -383,9 +396,7 @@ fn viscous_terms_read_the_ghosts_no_slip_velocities_and_continuity_does_not() {
     let world = jittered_world();
     let ghosts = world.query::<&Ghost>().iter().count();
     assert!(ghosts > 0);
-    let no_slip: Vec<DVec2> = (0..ghosts)
-        .map(|k| DVec2::new(0.3 - 0.05 * k as f64, 0.1 + 0.02 * k as f64))
-        .collect();
+    let no_slip = no_slip_velocities(&world);
     let mut swapped = jittered_world();
     for ((_, v), ns) in swapped
         .query_mut::<(&Ghost, &mut Velocity)>()
@@ -410,18 +421,7 @@ fn viscous_terms_read_the_ghosts_no_slip_velocities_and_continuity_does_not() {
         assert!(
             shear.reads().contains(NoSlipVelocity::X) && !plain.reads().contains(NoSlipVelocity::X)
         );
-        let mut r = Records::default();
-        let mut columns = Columns::default();
-        columns
-            .insert::<NoSlipVelocity>(NoSlipVelocity::SCOPE, no_slip.clone())
-            .unwrap();
-        r.pack_with(
-            &Particles::of(&world).unwrap(),
-            shear.reads(),
-            &constants().eos,
-            &columns,
-        )
-        .unwrap();
+        let r = packed(&world, shear.reads());
         let (on_swapped, on_world) = (
             packed(&swapped, plain.reads()),
             packed(&world, plain.reads()),

@@ -159,12 +159,12 @@ impl WallParticles {
             )));
         }
         let now: &[WallPose] = self.walls.now();
+        let placed: Vec<_> = now.iter().map(|w| w.body.placement()).collect();
         (&mut x[..], &mut v[..], &self.sites[..])
             .into_par_iter()
             .for_each(|(x, v, s)| {
-                let body = now[s.wall].body;
-                x.0 = body.to_world(s.rest);
-                v.0 = body.velocity_at(x.0);
+                x.0 = placed[s.wall].to_world(s.rest);
+                v.0 = now[s.wall].body.velocity_at(x.0);
             });
         Ok(())
     }

@@ -38,6 +38,7 @@
 
 use crate::vocab::{NoSlipSigns, NoSlipVelocity};
 use glam::DVec2;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::components::{Density, Fluid, Ghost, MirrorWall, Position, Pressure, Velocity};
 use sph_core::contract::Access;
@@ -87,6 +88,13 @@ pub struct Params {
     /// never pulls a fluid particle in, even one in tension (a contact that carries no
     /// tension). Default false.
     pub no_pull: bool,
+    /// Give every term the one velocity `slip` and `mirror` set for the viscous
+    /// terms, instead of the wall's own to continuity and the pressures: with
+    /// `slip: FreeSlip` and `mirror: true`, the mirror image of the nearby fluid's
+    /// velocity in the moving wall, as a mirrored ghost of a free-slip wall has it. The
+    /// records then carry no second velocity, and the momentum pass costs what it
+    /// costs with mirrors. Default false.
+    pub single_velocity: bool,
 }
 
 pub fn register(registry: &mut StageRegistry) {
@@ -94,6 +102,13 @@ pub fn register(registry: &mut StageRegistry) {
         "wall_pressure",
         "extrapolate the fluid's pressure to the wall particles (Adami et al. 2012)",
         |p: Params| {
+            if p.single_velocity && p.separation {
+                return Err(sph_core::ParamError::new(
+                    "single_velocity",
+                    true,
+                    "false when `separation` is true: separation sets the wall particles' normal velocity for continuity alone",
+                ));
+            }
             if p.mirror && p.separation {
                 return Err(sph_core::ParamError::new(
                     "mirror",
@@ -107,8 +122,11 @@ pub fn register(registry: &mut StageRegistry) {
                 one_sided: p.one_sided,
                 mirror: p.mirror,
                 no_pull: p.no_pull,
+                single_velocity: p.single_velocity,
                 sums: Vec::new(),
                 pull: Vec::new(),
+                seen: Vec::new(),
+                start: Vec::new(),
             })
         },
     );
@@ -133,10 +151,15 @@ pub struct WallPressure {
     one_sided: bool,
     mirror: bool,
     no_pull: bool,
+    single_velocity: bool,
     sums: Vec<Sums>,
     /// g - a_w per ghost, for the one-sided sums (zero elsewhere); kept between
     /// steps only to reuse its allocation.
     pull: Vec<DVec2>,
+    /// The fluid particles each wall particle sees, in fluid order (those of ghost g
+    /// at `seen[start[g]..start[g + 1]]`); kept only to reuse the allocations.
+    seen: Vec<u32>,
+    start: Vec<u32>,
 }
 
 impl Stage for WallPressure {
@@ -151,10 +174,12 @@ impl Stage for WallPressure {
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         require_neighbours(sim, "wall_pressure")?;
         sim.resources.insert(NoSlipSigns::default());
-        sim.resources
-            .get_or_default::<Columns>()
-            .insert::<NoSlipVelocity>(NoSlipVelocity::SCOPE, Vec::new())
-            .map_err(|e| SetupError::new("wall_pressure", e.to_string()))?;
+        if !self.single_velocity {
+            sim.resources
+                .get_or_default::<Columns>()
+                .insert::<NoSlipVelocity>(NoSlipVelocity::SCOPE, Vec::new())
+                .map_err(|e| SetupError::new("wall_pressure", e.to_string()))?;
+        }
         Ok(())
     }
 
@@ -219,8 +244,14 @@ impl Stage for WallPressure {
                 }
             }
         }
-        let support = c.support();
-        with_kernel!(c.kernel, c.h, |k| {
+        // The fluid particles each wall particle sees, in fluid order: the fluid's
+        // lists inverted by a counting sort, so that each wall particle adds its fluid
+        // neighbours in the order of a loop over the fluid, on any number of threads.
+        let (seen, start) = (&mut self.seen, &mut self.start);
+        seen.clear();
+        start.clear();
+        start.resize(gx.len() + 1, 0);
+        for pass in 0..2 {
             for i in 0..n {
                 let list = nb.of(i);
                 // The ghosts are last in each list; most particles have none.
@@ -233,13 +264,40 @@ impl Stage for WallPressure {
                     if !gs[g].is_wall_particle() {
                         continue;
                     }
+                    match pass {
+                        0 => start[g + 1] += 1,
+                        _ => {
+                            seen[start[g] as usize] = i as u32;
+                            start[g] += 1;
+                        }
+                    }
+                }
+            }
+            if pass == 0 {
+                // start[g] = where wall particle g's fluid begin; the second pass moves
+                // each to where the next begin, so shift back by one after it.
+                for g in 0..gx.len() {
+                    start[g + 1] += start[g];
+                }
+                seen.resize(start[gx.len()] as usize, 0);
+            } else {
+                start.rotate_right(1);
+                start[0] = 0;
+            }
+        }
+        let support = c.support();
+        let (seen, start, pull) = (&self.seen[..], &self.start[..], &self.pull[..]);
+        let (fx, fp, fr, fv, gx) = (&fx[..], &fp[..], &fr[..], &fv[..], &gx[..]);
+        with_kernel!(c.kernel, c.h, |k| {
+            self.sums.par_iter_mut().enumerate().for_each(|(g, s)| {
+                for &i in &seen[start[g] as usize..start[g + 1] as usize] {
+                    let i = i as usize;
                     let r = gx[g].0 - fx[i].0;
                     let d = r.length();
                     if d >= support {
                         continue;
                     }
                     let w = k.w(d);
-                    let s = &mut self.sums[g];
                     s.w += w;
                     s.pw += fp[i].0 * w;
                     s.rho_r += fr[i].0 * w * r;
@@ -247,7 +305,7 @@ impl Stage for WallPressure {
                     s.raised += (pull[g].dot(r) * fr[i].0).max(0.0) * w;
                     s.tension = s.tension.max(-fp[i].0);
                 }
-            }
+            });
         });
         let mut gp = column_mut::<Pressure>(ghost)?;
         let mut gr = column_mut::<Density>(ghost)?;
@@ -261,43 +319,52 @@ impl Stage for WallPressure {
         let signs = sim.resources.get_or_default::<NoSlipSigns>();
         signs.0.clear();
         signs.0.resize(gv.len(), 0.0);
+        let rest = eos.density(0.0);
         for (k, s) in self.sums.iter().enumerate() {
             if !gs[k].is_wall_particle() {
                 continue;
             }
-            let wall = wall_of(k)?;
-            if s.w > 0.0 {
-                let x = gx[k].0;
-                gp[k].0 = match self.one_sided {
-                    true => (s.pw + s.raised) / s.w,
-                    false => (s.pw + (gravity - wall.body.acceleration_at(x)).dot(s.rho_r)) / s.w,
-                };
-                if self.no_pull {
-                    gp[k].0 = gp[k].0.max(s.tension);
-                }
-                let (v_b, u) = (wall.body.velocity_at(x), s.vw / s.w);
-                viscous[k] = match self.slip {
-                    Slip::FreeSlip => v_b + (u - v_b).dot(wall.tangent()) * wall.tangent(),
-                    Slip::NoSlip => 2.0 * v_b - u,
-                    Slip::WallVelocity => v_b,
-                };
-                let n = wall.normal();
-                if self.mirror {
-                    let away = (u - v_b).dot(n);
-                    gv[k].0 = v_b - away * n;
-                    let v = viscous[k];
-                    viscous[k] = v - ((v - v_b).dot(n) + away) * n;
-                } else if self.separation {
-                    gv[k].0 = v_b + (u - v_b).dot(n).max(0.0) * n;
-                }
-            } else {
+            // Most wall particles have no fluid near: no pressure, and no fluid
+            // particle reads their velocities.
+            if s.w <= 0.0 || s.w.is_nan() {
                 gp[k].0 = 0.0;
+                gr[k].0 = rest;
+                continue;
+            }
+            let wall = wall_of(k)?;
+            let x = gx[k].0;
+            gp[k].0 = match self.one_sided {
+                true => (s.pw + s.raised) / s.w,
+                false => (s.pw + (gravity - wall.body.acceleration_at(x)).dot(s.rho_r)) / s.w,
+            };
+            if self.no_pull {
+                gp[k].0 = gp[k].0.max(s.tension);
+            }
+            let (v_b, u) = (wall.body.velocity_at(x), s.vw / s.w);
+            viscous[k] = match self.slip {
+                Slip::FreeSlip => v_b + (u - v_b).dot(wall.tangent()) * wall.tangent(),
+                Slip::NoSlip => 2.0 * v_b - u,
+                Slip::WallVelocity => v_b,
+            };
+            let n = wall.normal();
+            if self.mirror {
+                let away = (u - v_b).dot(n);
+                gv[k].0 = v_b - away * n;
+                let v = viscous[k];
+                viscous[k] = v - ((v - v_b).dot(n) + away) * n;
+            } else if self.separation {
+                gv[k].0 = v_b + (u - v_b).dot(n).max(0.0) * n;
+            }
+            if self.single_velocity {
+                gv[k].0 = viscous[k];
             }
             gr[k].0 = eos.density(gp[k].0);
         }
-        sim.resources
-            .get_or_default::<Columns>()
-            .insert::<NoSlipVelocity>(NoSlipVelocity::SCOPE, viscous)?;
+        if !self.single_velocity {
+            sim.resources
+                .get_or_default::<Columns>()
+                .insert::<NoSlipVelocity>(NoSlipVelocity::SCOPE, viscous)?;
+        }
         Ok(())
     }
 
@@ -323,37 +390,46 @@ mod tests {
     use super::*;
     use sph_core::components::Mass;
 
-    /// A closed 0.2 m box lined with wall particles, and a row of five fluid particles
-    /// 0.005 m above its floor, the middle one in tension (-500 Pa) and the others at
-    /// +100 Pa, after `WallPressure(one_sided: true, no_pull: ...)`: the wall particles'
-    /// pressures, with each one's distance from the particle in tension.
-    fn floor_pressures(no_pull: bool) -> Vec<(f64, f64)> {
+    /// A closed 0.2 m box lined with wall particles and a row of five fluid particles
+    /// 0.005 m above its floor (x = 0.08-0.12 m), particle k at pressure `pressure(k)`,
+    /// all moving at `u`, after `WallParticles`, `NeighbourGrid` and
+    /// `WallPressure` with `params` have run once.
+    fn row_on_the_floor(pressure: impl Fn(usize) -> f64, u: DVec2, params: &str) -> Sim {
         let mut world = hecs::World::new();
         crate::testing::closed_box(&mut world, 0.2, 0.2);
         for k in 0..5 {
-            let p = if k == 2 { -500.0 } else { 100.0 };
             world.spawn((
                 Fluid,
                 Position(DVec2::new(0.08 + 0.01 * k as f64, 0.005)),
-                Velocity(DVec2::ZERO),
+                Velocity(u),
                 Density(1000.0),
-                Pressure(p),
+                Pressure(pressure(k)),
                 Mass(0.1),
             ));
         }
         let mut sim = crate::testing::sim(world);
-        let params = format!("(one_sided: true, no_pull: {no_pull})");
         let mut stages = crate::testing::pipeline(
             &mut sim,
             &[
                 ("wall_particles", "()"),
                 ("neighbour_grid", "()"),
-                ("wall_pressure", &params),
+                ("wall_pressure", params),
             ],
         );
         for stage in &mut stages {
             stage.run(&mut sim).unwrap();
         }
+        sim
+    }
+
+    /// A closed 0.2 m box lined with wall particles, and a row of five fluid particles
+    /// 0.005 m above its floor, the middle one in tension (-500 Pa) and the others at
+    /// +100 Pa, after `WallPressure(one_sided: true, no_pull: ...)`: the wall particles'
+    /// pressures, with each one's distance from the particle in tension.
+    fn floor_pressures(no_pull: bool) -> Vec<(f64, f64)> {
+        let pressure = |k| if k == 2 { -500.0 } else { 100.0 };
+        let params = format!("(one_sided: true, no_pull: {no_pull})");
+        let sim = row_on_the_floor(pressure, DVec2::ZERO, &params);
         let ghost = archetype::<Ghost>(&sim.world).unwrap();
         let (x, p) = (
             column::<Position>(ghost).unwrap(),
@@ -364,6 +440,44 @@ mod tests {
             .zip(p.iter())
             .map(|(x, p)| ((x.0 - tense).length(), p.0))
             .collect()
+    }
+
+    /// With `single_velocity`, `mirror` and free slip, a wall particle beside fluid that
+    /// moves at u (uniform, so the smoothed u_f is u) moves at u's mirror image in the
+    /// fixed floor, (u_x, -u_y), and the records get no second (no-slip) velocity; with
+    /// two velocities it moves at (0, -u_y), the wall's own tangential velocity.
+    #[test]
+    fn a_single_velocity_wall_moves_as_the_fluid_s_mirror_image() {
+        let u = DVec2::new(0.3, -0.2);
+        let run = |single: bool| {
+            let params = format!("(mirror: true, single_velocity: {single})");
+            let sim = row_on_the_floor(|_| 100.0, u, &params);
+            let ghost = archetype::<Ghost>(&sim.world).unwrap();
+            let (x, v, p) = (
+                column::<Position>(ghost).unwrap(),
+                column::<Velocity>(ghost).unwrap(),
+                column::<Pressure>(ghost).unwrap(),
+            );
+            let floor: Vec<DVec2> = (0..x.len())
+                .filter(|&k| p[k].0 > 0.0 && x[k].0.y < 0.0 && x[k].0.x > 0.0)
+                .map(|k| v[k].0)
+                .collect();
+            let column = sim
+                .resources
+                .get::<Columns>()
+                .is_some_and(|c| c.contains::<NoSlipVelocity>());
+            (floor, column)
+        };
+        let (single, column) = run(true);
+        assert!(single.len() >= 5 && !column);
+        for v in single {
+            assert!((v - DVec2::new(u.x, -u.y)).length() < 1e-12, "{v}");
+        }
+        let (two, column) = run(false);
+        assert!(two.len() >= 5 && column);
+        for v in two {
+            assert!((v - DVec2::new(0.0, -u.y)).length() < 1e-12, "{v}");
+        }
     }
 
     /// With `no_pull` every wall particle within the support of the particle in tension

@@ -67,12 +67,19 @@ impl Layouts {
     pub const FILTER: Layouts = Layouts(4);
     /// Every layout above.
     pub const COMMON: Layouts = Layouts(7);
+    /// The momentum record with a vector column in slots 2 and 3 (a viscous term that
+    /// reads the walls' no-slip velocity). Not in [`Layouts::COMMON`]: only the
+    /// compiled term sets with a viscous term name it.
+    pub const SHEAR: Layouts = Layouts(8);
 
     const MOMENTUM_BITS: u16 = Fields::of(&Field::MOMENTUM).bits();
     const GRADIENT_BITS: u16 = Fields::of(&Field::MOMENTUM)
         .with(Fields::of(&[Field::Slot0, Field::Slot1]))
         .bits();
     const FILTER_BITS: u16 = Fields::GEOMETRY.with(Fields::of(&[Field::Rho])).bits();
+    const SHEAR_BITS: u16 = Fields::of(&Field::MOMENTUM)
+        .with(Fields::of(&[Field::Slot2, Field::Slot3]))
+        .bits();
 
     /// The layout of records packed with `reads` (and the geometry, always packed),
     /// if it is one of the above; else [`Layouts::NONE`].
@@ -81,13 +88,14 @@ impl Layouts {
             Self::MOMENTUM_BITS => Self::MOMENTUM,
             Self::GRADIENT_BITS => Self::GRADIENT,
             Self::FILTER_BITS => Self::FILTER,
+            Self::SHEAR_BITS => Self::SHEAR,
             _ => Self::NONE,
         }
     }
 
     /// The field set to pack for a pass that reads `reads`: the smallest compiled
     /// layout that holds them (the density filters', the momentum record, then the
-    /// momentum record with a vector column), so that the pass runs a loop with
+    /// momentum record with a vector column in slots 0-1, then in slots 2-3), so that the pass runs a loop with
     /// offsets known when compiled (an artificial viscosity alone, say, reads the
     /// momentum record less p / rho^2; packing the one field more costs far less than
     /// finding the offsets at run time); `reads` with the geometry where no layout
@@ -100,6 +108,8 @@ impl Layouts {
             Fields(Self::MOMENTUM_BITS)
         } else if bits & !Self::GRADIENT_BITS == 0 {
             Fields(Self::GRADIENT_BITS)
+        } else if bits & !Self::SHEAR_BITS == 0 {
+            Fields(Self::SHEAR_BITS)
         } else {
             Fields(bits)
         }
@@ -276,36 +286,41 @@ pub trait PairTerm: Sync + Clone {
 /// A term summed together with the count of neighbours nearer than `radius`, in the
 /// same loop (the distance is computed for the term anyway): one compare and one add
 /// per group. Neighbour lists with a skin hold pairs beyond the kernel support; this
-/// counts those within it without a pass of its own.
+/// counts those within it without a pass of its own. With `KERNEL_SUM` the loop also
+/// sums m_j W_ij (the density summation's sum, i excluded), for a filter that would
+/// otherwise take a pass of its own; without, the sum is 0 and costs nothing.
 #[derive(Clone, Copy, Debug)]
-pub struct Counted<T> {
+pub struct Counted<T, const KERNEL_SUM: bool = false> {
     pub term: T,
     /// [m]
     pub radius: f64,
 }
 
-impl<T: PairTerm> PairTerm for Counted<T> {
+impl<T: PairTerm, const KERNEL_SUM: bool> PairTerm for Counted<T, KERNEL_SUM> {
     const LAYOUTS: Layouts = T::LAYOUTS;
-    type Acc<L: Lane> = (T::Acc<L>, L);
-    /// The term's result and the count.
-    type Out = (T::Out, u32);
+    type Acc<L: Lane> = (T::Acc<L>, L, L);
+    /// The term's result, the count and sum_j m_j W_ij [kg/m^2].
+    type Out = (T::Out, u32, f64);
 
     fn reads(&self) -> Fields {
         self.term.reads()
     }
     #[inline(always)]
     fn zero<L: Lane>(&self) -> Self::Acc<L> {
-        (self.term.zero(), L::zero())
+        (self.term.zero(), L::zero(), L::zero())
     }
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, acc: &mut Self::Acc<L>) {
         self.term.pair(me, p, &mut acc.0);
-        // The padding lanes lie four supports away: not counted.
+        // The padding lanes lie four supports away: not counted, and of zero mass.
         acc.1 = acc.1 + L::splat(1.0).keep(p.r.lt(L::splat(self.radius)));
+        if KERNEL_SUM {
+            acc.2 = acc.2 + p.j(Field::Mass) * p.w;
+        }
     }
     #[inline(always)]
     fn finish<L: Lane>(&self, me: &Me, acc: Self::Acc<L>) -> Self::Out {
-        (self.term.finish(me, acc.0), acc.1.sum() as u32)
+        (self.term.finish(me, acc.0), acc.1.sum() as u32, acc.2.sum())
     }
 }
 
@@ -383,6 +398,9 @@ impl<'a, T: PairTerm, K: Kernel> Pass<'a, T, K> {
                 }
                 if const { T::LAYOUTS.has(Layouts::FILTER) } && bits == Layouts::FILTER_BITS {
                     return $f::<T, K, { Layouts::FILTER_BITS }>(self, i, neighbours);
+                }
+                if const { T::LAYOUTS.has(Layouts::SHEAR) } && bits == Layouts::SHEAR_BITS {
+                    return $f::<T, K, { Layouts::SHEAR_BITS }>(self, i, neighbours);
                 }
                 $f::<T, K, 0>(self, i, neighbours)
             }};

@@ -190,7 +190,7 @@ fn a_layout_a_term_is_not_compiled_for_sums_the_same_bits() {
 }
 
 #[test]
-fn layouts_name_the_three_compiled_field_sets() {
+fn layouts_name_the_four_compiled_field_sets() {
     let rho = Fields::of(&[Field::Rho]);
     assert_eq!(Layouts::of(rho), Layouts::FILTER);
     assert_eq!(Layouts::of(Fields::of(&Field::MOMENTUM)), Layouts::MOMENTUM);
@@ -198,6 +198,18 @@ fn layouts_name_the_three_compiled_field_sets() {
     assert_eq!(
         Layouts::of(Fields::of(&Field::MOMENTUM).with(slots)),
         Layouts::GRADIENT
+    );
+    let far_slots = Fields::of(&[Field::Slot2, Field::Slot3]);
+    assert_eq!(
+        Layouts::of(Fields::of(&Field::MOMENTUM).with(far_slots)),
+        Layouts::SHEAR
+    );
+    assert!(!Layouts::COMMON.has(Layouts::SHEAR));
+    // A viscosity alone with the walls' velocities is packed as the SHEAR layout.
+    let av = Fields::of(&[Field::Vx, Field::Vy, Field::Rho, Field::Sound]).with(far_slots);
+    assert_eq!(
+        Layouts::widen(av),
+        Fields::of(&Field::MOMENTUM).with(far_slots)
     );
     // (x, y, m) with pressures only: no compiled layout.
     assert_eq!(Layouts::of(Fields::of(&[Field::PRho2])), Layouts::NONE);
