@@ -31,10 +31,12 @@
 //! the viscous velocity takes the same normal part: the wall state u_R = 2 u_w - u_L
 //! along n of Zhang, Hu & Adams's (2017) one-sided Riemann problem, from u_f.
 //!
-//! Runs after `Eos` (the fluid's pressures) and before the rate stages. The sums are
-//! taken over the fluid's neighbour lists in fluid order, one thread, so the result is
-//! the same for any thread count; only the few fluid particles with a wall particle in
-//! their lists contribute.
+//! Runs after `Eos` (the fluid's pressures) and before the rate stages. Each wall
+//! particle sums the fluid particles whose neighbour lists hold it, in fluid order (the
+//! lists inverted, kept until the grid rebuilds them), so the wall particles are summed
+//! in parallel and the result is the same for any thread count. With `largest: true`
+//! the pressure is the largest carried fluid pressure instead of the mean, and with
+//! `single_velocity: true` every term reads the viscous velocity (their docs below).
 
 use crate::vocab::{NoSlipSigns, NoSlipVelocity};
 use glam::DVec2;
