@@ -67,3 +67,33 @@ pub fn standard_registry() -> StageRegistry {
     register_standard(&mut registry);
     registry
 }
+
+#[cfg(test)]
+mod tests {
+    /// Every standard stage answers to the name it is registered under: checkpoints,
+    /// `--profile` and the contract messages key each stage by `Stage::name`, and a
+    /// resumed run finds a stage's saved state under the scenario's name for it.
+    #[test]
+    fn every_standard_stage_is_named_as_registered() {
+        let registry = crate::standard_registry();
+        let names: Vec<String> = registry.list().map(|(n, _)| n.to_string()).collect();
+        assert!(names.len() >= 19, "{names:?}");
+        for name in &names {
+            // The one stage without defaults for every parameter.
+            let params = match name.as_str() {
+                "damping_zone" => "(from: 1.0, to: 2.0)",
+                // Read through a seeded map, as the scenario loader hands it over.
+                "probe" => "{}",
+                _ => "()",
+            };
+            let options = sph_core::registry::ron_options();
+            let mut de = ron::Deserializer::from_str_with_options(params, &options).unwrap();
+            let mut erased = <dyn erased_serde::Deserializer>::erase(&mut de);
+            let built = registry.build(name, &mut erased).unwrap();
+            match built {
+                Ok(b) => assert_eq!(b.stage.name(), name, "stage registered as {name}"),
+                Err(e) => panic!("{name}: {params} refused: {e}"),
+            }
+        }
+    }
+}

@@ -202,18 +202,7 @@ impl Stage for Forces {
                     base: self.terms,
                     plugins: &self.plugins,
                 };
-                match sums.as_mut() {
-                    Some(sums) => {
-                        rates::run_set::<_, true>(sim, terms, out, &mut self.chunk_power, sums)
-                    }
-                    None => rates::run_set::<_, false>(
-                        sim,
-                        terms,
-                        out,
-                        &mut self.chunk_power,
-                        &mut Vec::new(),
-                    ),
-                }
+                rates::run_set_with(sim, terms, out, &mut self.chunk_power, sums.as_mut())
             }
         };
         if let (Some(sums), Some(kept)) = (sums, sim.resources.get_mut::<KernelSums>()) {

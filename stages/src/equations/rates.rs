@@ -100,8 +100,8 @@ pub(crate) fn run(
     const RIEMANN: u16 = bits(&[RiemannPressure, Continuity, RiemannDiffusion]);
     if let Some(sums) = kernel_sums {
         return match Fixed::<RIEMANN>::of(terms) {
-            Some(set) if !generic_only() => run_set::<_, true>(sim, set, out, chunk_power, sums),
-            _ => run_set::<_, true>(sim, *terms, out, chunk_power, sums),
+            Some(set) if !generic_only() => run_set_with(sim, set, out, chunk_power, Some(sums)),
+            _ => run_set_with(sim, *terms, out, chunk_power, Some(sums)),
         };
     }
     let none = &mut Vec::new();
@@ -142,9 +142,24 @@ fn generic_only() -> bool {
     *GENERIC.get_or_init(|| std::env::var_os("SPH_GENERIC_TERMS").is_some())
 }
 
+/// [`run_set`] with the kernel sums when `kernel_sums` is given (the loop compiled
+/// with or without them).
+pub(crate) fn run_set_with<R: RateTerm + Copy>(
+    sim: &mut Sim,
+    terms: R,
+    out: Outputs,
+    chunk_power: &mut Vec<Power>,
+    kernel_sums: Option<&mut Vec<f64>>,
+) -> Result<Power, StepError> {
+    match kernel_sums {
+        Some(sums) => run_set::<_, true>(sim, terms, out, chunk_power, sums),
+        None => run_set::<_, false>(sim, terms, out, chunk_power, &mut Vec::new()),
+    }
+}
+
 /// [`run`] for a term set `terms`; with `KERNEL_SUM`, each fluid particle's
 /// sum_j m_j W_ij into `kernel_sums` (resized to the fluid).
-pub(crate) fn run_set<R: RateTerm + Copy, const KERNEL_SUM: bool>(
+fn run_set<R: RateTerm + Copy, const KERNEL_SUM: bool>(
     sim: &mut Sim,
     terms: R,
     out: Outputs,

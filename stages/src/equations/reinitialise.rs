@@ -263,13 +263,16 @@ fn filter_all<T: PairTerm<Out = f64>, K: Kernel>(
 
 #[cfg(test)]
 mod tests {
-    use sph_core::components::{Density, Fluid, Mass, Position, Pressure, Velocity};
+    use crate::vocab::KernelSums;
+    use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure, Velocity};
+    use sph_core::vocab::{HalfDensity, Neighbours};
     use sph_core::world::{archetype, column};
 
     /// A 0.2 m box lined with wall particles, and a 10 x 6 block of water on its floor
     /// whose densities vary by 2 % from particle to particle (a free surface on top, where
-    /// the kernel is cut): the fluid's densities after `stages` have run once.
-    fn filtered(stages: &[(&str, &str)]) -> Vec<f64> {
+    /// the kernel is cut), each with a half-step density 3 kg/m^3 above its density:
+    /// the sim after `stages` have run once.
+    fn after(stages: &[(&str, &str)]) -> sph_core::Sim {
         let mut world = hecs::World::new();
         crate::testing::closed_box(&mut world, 0.2, 0.2);
         for a in 0..10 {
@@ -283,6 +286,7 @@ mod tests {
                     )),
                     Velocity(glam::DVec2::new(0.01 * k as f64, 0.0)),
                     Density(990.0 + 2.0 * k as f64),
+                    HalfDensity(993.0 + 2.0 * k as f64),
                     Pressure(0.0),
                     Mass(0.1),
                 ));
@@ -293,9 +297,93 @@ mod tests {
         for stage in &mut built {
             stage.run(&mut sim).unwrap();
         }
+        sim
+    }
+
+    /// The fluid's densities after `stages` (see [`after`]).
+    fn filtered(stages: &[(&str, &str)]) -> Vec<f64> {
+        let sim = after(stages);
         let fluid = archetype::<Fluid>(&sim.world).unwrap();
         let rho = column::<Density>(fluid).unwrap();
         rho.iter().map(|r| r.0).collect()
+    }
+
+    /// The free-surface summation writes its formula (`free_surface_density.rs`):
+    /// rho_sum = sum_j m_j W_ij / (sigma_0 ds^2) over every particle within the support,
+    /// i itself, the fluid and the wall particles, summed here by a plain loop with
+    /// sigma_0 ds^2 from `kernel::lattice_sum`, then rho_sum + max(0, rho_i - rho_sum)
+    /// rho_0 / rho_i (relative 1e-12: the order of addition). Every filter, with its own
+    /// pass or the momentum pass's sums, shifts the half-step density by the correction
+    /// it makes to the density (to 1e-9 kg/m^3, the round-off of a difference of
+    /// values near 1,000), so the leapfrog carries the filtered state on.
+    #[test]
+    fn the_free_surface_summation_writes_its_formula_and_shifts_the_half_step_density() {
+        let walls = [("wall_particles", "()"), ("neighbour_grid", "()")];
+        let start = after(&walls);
+        let c = &start.constants;
+        let (kind, h, rho0) = (c.kernel, c.h, c.eos.rho0);
+        let inv_lattice_sum = 1.0 / sph_core::kernel::lattice_sum(kind, h, c.spacing);
+        let mut all: Vec<(glam::DVec2, f64)> = Vec::new();
+        for (x, m) in start.world.query::<(&Position, &Mass)>().iter() {
+            all.push((x.0, m.0));
+        }
+        let fluid = archetype::<Fluid>(&start.world).unwrap();
+        let (x0, rho_0) = (
+            column::<Position>(fluid).unwrap(),
+            column::<Density>(fluid).unwrap(),
+        );
+        let expected: Vec<f64> = (0..x0.len())
+            .map(|i| {
+                let sum: f64 = all
+                    .iter()
+                    .map(|(x, m)| m * sph_core::kernel::w(kind, h, (*x - x0[i].0).length()))
+                    .sum();
+                let summed = sum * inv_lattice_sum;
+                summed + (rho_0[i].0 - summed).max(0.0) * rho0 / rho_0[i].0
+            })
+            .collect();
+        let own = filtered(&[
+            walls[0],
+            walls[1],
+            ("reinitialise", "(filter: FreeSurface)"),
+        ]);
+        for (i, (a, b)) in own.iter().zip(&expected).enumerate() {
+            assert!((a - b).abs() <= 1e-12 * b, "particle {i}: {a} against {b}");
+        }
+        for filter in [
+            vec![
+                walls[0],
+                walls[1],
+                ("reinitialise", "(filter: FreeSurface)"),
+            ],
+            vec![walls[0], walls[1], ("reinitialise", "(filter: Shepard)")],
+            vec![
+                walls[0],
+                walls[1],
+                ("eos", "()"),
+                ("wall_pressure", "()"),
+                (
+                    "forces",
+                    "(terms: [RiemannPressure(), Continuity(), RiemannDiffusion()])",
+                ),
+                ("reinitialise", "(filter: FreeSurface, sums: Forces)"),
+            ],
+        ] {
+            let sim = after(&filter);
+            let fluid = archetype::<Fluid>(&sim.world).unwrap();
+            let rho = column::<Density>(fluid).unwrap();
+            let half = column::<HalfDensity>(fluid).unwrap();
+            for i in 0..rho.len() {
+                // The half-step density started 3 above the density.
+                let shift = half[i].0 - (rho_0[i].0 + 3.0);
+                let change = rho[i].0 - rho_0[i].0;
+                assert!(
+                    (shift - change).abs() <= 1e-9,
+                    "{:?}: particle {i}: half-step density moved {shift}, density {change}",
+                    filter.last()
+                );
+            }
+        }
     }
 
     /// The free-surface summation from the momentum pass's sums (`sums: Forces`, after
@@ -336,6 +424,88 @@ mod tests {
                     "{terms}: particle {i}: {a} against {b}"
                 );
             }
+        }
+    }
+
+    /// The stage declares what it reads: the neighbour lists always, and the momentum
+    /// pass's kernel sums only with `sums: Forces`, so the contract check refuses it
+    /// before `NeighbourGrid`, and with `sums: Forces` before `Forces`, and lets the
+    /// own pass run without a `Forces` at all (the lists then lack only a clock).
+    #[test]
+    fn the_filter_declares_the_lists_and_the_momentum_pass_sums_it_reads() {
+        use sph_core::contract::{check, Breach, Quantity};
+        let registry = crate::standard_registry();
+        let access = |name: &str, params: &str| {
+            let options = sph_core::registry::ron_options();
+            let mut de = ron::Deserializer::from_str_with_options(params, &options).unwrap();
+            let mut erased = <dyn erased_serde::Deserializer>::erase(&mut de);
+            registry
+                .build(name, &mut erased)
+                .unwrap()
+                .unwrap()
+                .stage
+                .access()
+        };
+        let grid = access("neighbour_grid", "()");
+        let forces = access("forces", "(terms: [RiemannPressure(), Continuity()])");
+        let fused = access("reinitialise", "(filter: FreeSurface, sums: Forces)");
+        let own = access("reinitialise", "(filter: FreeSurface)");
+        let unwritten = |list: &[&sph_core::contract::Access], q: Quantity, reader: usize| {
+            matches!(
+                check(list.iter().map(|a| (*a, 1))),
+                Err(Breach::Unwritten { quantity, reader: r, .. }) if quantity == q && r == reader
+            )
+        };
+        let sums = Quantity::of::<KernelSums>();
+        assert!(unwritten(&[&own, &grid], Quantity::of::<Neighbours>(), 0));
+        assert!(unwritten(&[&grid, &fused, &forces], sums, 1));
+        // Past the filter the lists lack only a clock writer.
+        assert_eq!(
+            check([(&grid, 1), (&forces, 1), (&fused, 1)]),
+            Err(Breach::NoClock)
+        );
+        assert_eq!(check([(&grid, 1), (&own, 1)]), Err(Breach::NoClock));
+    }
+
+    /// After the Shepard filter, every mirrored ghost carries its source's filtered
+    /// density (`GhostWalls` without the hydrostatic correction: the ghosts hold their
+    /// sources' densities), not the density it was mirrored with.
+    #[test]
+    fn mirrored_ghosts_take_their_sources_filtered_density() {
+        let mirrors = [
+            ("ghost_walls", "(hydrostatic: false)"),
+            ("neighbour_grid", "()"),
+        ];
+        let before = filtered(&mirrors);
+        let sim = after(&[
+            mirrors[0],
+            mirrors[1],
+            ("reinitialise", "(filter: Shepard)"),
+        ]);
+        let fluid = archetype::<Fluid>(&sim.world).unwrap();
+        let rho: Vec<f64> = column::<Density>(fluid)
+            .unwrap()
+            .iter()
+            .map(|r| r.0)
+            .collect();
+        let moved = rho
+            .iter()
+            .zip(&before)
+            .filter(|(a, b)| (*a - *b).abs() > 1.0)
+            .count();
+        assert!(moved >= 10, "the filter moved {moved} densities");
+        let ghost = archetype::<Ghost>(&sim.world).unwrap();
+        let (gs, gr) = (
+            column::<Ghost>(ghost).unwrap(),
+            column::<Density>(ghost).unwrap(),
+        );
+        assert!(gs.len() >= 20, "{} ghosts", gs.len());
+        for (g, r) in gs.iter().zip(gr.iter()) {
+            assert_eq!(
+                r.0, rho[g.source as usize],
+                "a ghost of particle {}",
+                g.source
+            );
         }
     }
 

@@ -474,6 +474,148 @@ mod tests {
             .collect()
     }
 
+    /// A closed 0.2 m box lined with wall particles, a 6 x 4 block of fluid in its
+    /// lower left corner whose pressures (-300 to +1,700 Pa), densities and velocities
+    /// vary from particle to particle, after `WallParticles`, `NeighbourGrid` and
+    /// `WallPressure` with `params` have run once.
+    fn block_in_the_corner(params: &str) -> Sim {
+        let mut world = hecs::World::new();
+        crate::testing::closed_box(&mut world, 0.2, 0.2);
+        for a in 0..6 {
+            for b in 0..4 {
+                let k = (7 * a + 3 * b) % 11;
+                world.spawn((
+                    Fluid,
+                    Position(DVec2::new(0.005 + 0.01 * a as f64, 0.005 + 0.01 * b as f64)),
+                    Velocity(DVec2::new(
+                        0.1 * k as f64 - 0.4,
+                        0.05 * (k % 4) as f64 - 0.07,
+                    )),
+                    Density(995.0 + k as f64),
+                    Pressure(200.0 * k as f64 - 300.0),
+                    Mass(0.1),
+                ));
+            }
+        }
+        let mut sim = crate::testing::sim(world);
+        let mut stages = crate::testing::pipeline(
+            &mut sim,
+            &[
+                ("wall_particles", "()"),
+                ("neighbour_grid", "()"),
+                ("wall_pressure", params),
+            ],
+        );
+        for stage in &mut stages {
+            stage.run(&mut sim).unwrap();
+        }
+        sim
+    }
+
+    /// Each wall particle's pressure, density and two velocities are the formulas of
+    /// the module's comment, summed here by a plain loop over the fluid within the
+    /// support (the box is at rest: v_b = a_w = 0), for Adami et al.'s eq. 27, the
+    /// one-sided carry, each slip, `mirror` and `separation`: W the kernel, u_f =
+    /// sum v_f W / sum W, t and n the wall's tangent and normal; the density is Tait's
+    /// of the pressure. Relative 1e-9 (the order of addition); a wall particle with no
+    /// fluid near keeps p = 0 and rho_0. Both walls of the corner are wetted, so a
+    /// wall particle that took the other wall's tangent would fail.
+    #[test]
+    fn the_wall_pressure_and_velocities_are_their_formulas() {
+        for params in [
+            "()",
+            "(one_sided: true)",
+            "(slip: NoSlip)",
+            "(slip: WallVelocity)",
+            "(mirror: true)",
+            "(mirror: true, slip: NoSlip)",
+            "(separation: true)",
+        ] {
+            let sim = block_in_the_corner(params);
+            let c = &sim.constants;
+            let (support, g, eos, kind, h) = (c.support(), c.gravity, c.eos, c.kernel, c.h);
+            let fluid = archetype::<Fluid>(&sim.world).unwrap();
+            let (fx, fp, fr, fv) = (
+                column::<Position>(fluid).unwrap(),
+                column::<Pressure>(fluid).unwrap(),
+                column::<Density>(fluid).unwrap(),
+                column::<Velocity>(fluid).unwrap(),
+            );
+            let ghost = archetype::<Ghost>(&sim.world).unwrap();
+            let (gx, gp, gr, gv, gw) = (
+                column::<Position>(ghost).unwrap(),
+                column::<Pressure>(ghost).unwrap(),
+                column::<Density>(ghost).unwrap(),
+                column::<Velocity>(ghost).unwrap(),
+                column::<MirrorWall>(ghost).unwrap(),
+            );
+            let columns = sim.resources.get::<Columns>().unwrap();
+            let viscous = columns.get::<NoSlipVelocity>().unwrap();
+            let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * (1.0 + b.abs());
+            let (mut floor, mut side) = (0, 0);
+            for k in 0..gx.len() {
+                let wall = sim.world.get::<&WallPose>(gw[k].0).unwrap();
+                let (t, n) = (wall.tangent(), wall.normal());
+                let (mut sw, mut spw, mut carry, mut raised, mut svw) =
+                    (0.0, 0.0, 0.0, 0.0, DVec2::ZERO);
+                for f in 0..fx.len() {
+                    let r = gx[k].0 - fx[f].0;
+                    if r.length() >= support {
+                        continue;
+                    }
+                    let w = sph_core::kernel::w(kind, h, r.length());
+                    sw += w;
+                    spw += fp[f].0 * w;
+                    carry += fr[f].0 * g.dot(r) * w;
+                    raised += (fr[f].0 * g.dot(r)).max(0.0) * w;
+                    svw += fv[f].0 * w;
+                }
+                if sw == 0.0 {
+                    assert_eq!((gp[k].0, gr[k].0), (0.0, eos.density(0.0)), "{params}");
+                    continue;
+                }
+                match n.y > 0.5 {
+                    true => floor += 1,
+                    false => side += 1,
+                }
+                let p = match params {
+                    "(one_sided: true)" => (spw + raised) / sw,
+                    _ => (spw + carry) / sw,
+                };
+                assert!(close(gp[k].0, p), "{params}: {} Pa against {p}", gp[k].0);
+                assert!(close(gr[k].0, eos.density(p)), "{params}: density");
+                let u = svw / sw;
+                let mut visc = match params {
+                    "(slip: NoSlip)" | "(mirror: true, slip: NoSlip)" => -u,
+                    "(slip: WallVelocity)" => DVec2::ZERO,
+                    _ => u.dot(t) * t,
+                };
+                let mut v = DVec2::ZERO;
+                if params.starts_with("(mirror") {
+                    v = -u.dot(n) * n;
+                    visc = visc - (visc.dot(n) + u.dot(n)) * n;
+                } else if params == "(separation: true)" {
+                    v = u.dot(n).max(0.0) * n;
+                }
+                let near = |a: DVec2, b: DVec2| close(a.x, b.x) && close(a.y, b.y);
+                assert!(
+                    near(gv[k].0, v),
+                    "{params}: velocity {} against {v}",
+                    gv[k].0
+                );
+                assert!(
+                    near(viscous[k], visc),
+                    "{params}: viscous {} against {visc}",
+                    viscous[k]
+                );
+            }
+            assert!(
+                floor >= 10 && side >= 8,
+                "{params}: {floor} floor, {side} side wall particles wetted"
+            );
+        }
+    }
+
     /// With `single_velocity`, `mirror` and free slip, a wall particle beside fluid that
     /// moves at u (uniform, so the smoothed u_f is u) moves at u's mirror image in the
     /// fixed floor, (u_x, -u_y), and the records get no second (no-slip) velocity; with
