@@ -70,9 +70,9 @@ pub fn standard_registry() -> StageRegistry {
 
 #[cfg(test)]
 mod tests {
-    /// Every standard stage answers to the name it is registered under: checkpoints,
-    /// `--profile` and the contract messages key each stage by `Stage::name`, and a
-    /// resumed run finds a stage's saved state under the scenario's name for it.
+    /// Every standard stage answers to the name it is registered under, as
+    /// `Stage::name` promises: the tracing spans, the `--profile` table and the errors
+    /// name a stage by it.
     #[test]
     fn every_standard_stage_is_named_as_registered() {
         let registry = crate::standard_registry();
