@@ -63,3 +63,14 @@ pub(crate) fn pipeline(sim: &mut Sim, stages: &[(&str, &str)]) -> Vec<Box<dyn St
     }
     built
 }
+
+/// A sim over `world` after the standard stages `stages` (as [`pipeline`] builds them)
+/// have been set up and then run once, in order.
+pub(crate) fn after_one_step(world: hecs::World, stages: &[(&str, &str)]) -> Sim {
+    let mut sim = sim(world);
+    let mut built = pipeline(&mut sim, stages);
+    for stage in &mut built {
+        stage.run(&mut sim).unwrap();
+    }
+    sim
+}

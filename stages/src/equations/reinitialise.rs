@@ -292,12 +292,7 @@ mod tests {
                 ));
             }
         }
-        let mut sim = crate::testing::sim(world);
-        let mut built = crate::testing::pipeline(&mut sim, stages);
-        for stage in &mut built {
-            stage.run(&mut sim).unwrap();
-        }
-        sim
+        crate::testing::after_one_step(world, stages)
     }
 
     /// The fluid's densities after `stages` (see [`after`]).

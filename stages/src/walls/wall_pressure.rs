@@ -439,19 +439,14 @@ mod tests {
                 Mass(0.1),
             ));
         }
-        let mut sim = crate::testing::sim(world);
-        let mut stages = crate::testing::pipeline(
-            &mut sim,
+        crate::testing::after_one_step(
+            world,
             &[
                 ("wall_particles", "()"),
                 ("neighbour_grid", "()"),
                 ("wall_pressure", params),
             ],
-        );
-        for stage in &mut stages {
-            stage.run(&mut sim).unwrap();
-        }
-        sim
+        )
     }
 
     /// A closed 0.2 m box lined with wall particles, and a row of five fluid particles
@@ -497,19 +492,14 @@ mod tests {
                 ));
             }
         }
-        let mut sim = crate::testing::sim(world);
-        let mut stages = crate::testing::pipeline(
-            &mut sim,
+        crate::testing::after_one_step(
+            world,
             &[
                 ("wall_particles", "()"),
                 ("neighbour_grid", "()"),
                 ("wall_pressure", params),
             ],
-        );
-        for stage in &mut stages {
-            stage.run(&mut sim).unwrap();
-        }
-        sim
+        )
     }
 
     /// Each wall particle's pressure, density and two velocities are the formulas of
