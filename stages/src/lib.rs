@@ -86,14 +86,8 @@ mod tests {
                 "probe" => "{}",
                 _ => "()",
             };
-            let options = sph_core::registry::ron_options();
-            let mut de = ron::Deserializer::from_str_with_options(params, &options).unwrap();
-            let mut erased = <dyn erased_serde::Deserializer>::erase(&mut de);
-            let built = registry.build(name, &mut erased).unwrap();
-            match built {
-                Ok(b) => assert_eq!(b.stage.name(), name, "stage registered as {name}"),
-                Err(e) => panic!("{name}: {params} refused: {e}"),
-            }
+            let stage = crate::testing::stage(name, params);
+            assert_eq!(stage.name(), name, "stage registered as {name}");
         }
     }
 }

@@ -45,18 +45,30 @@ pub(crate) fn closed_box(world: &mut hecs::World, width: f64, height: f64) {
     }
 }
 
-/// The standard stages `(name, RON parameters)`, built as a scenario would build them
-/// and set up on `sim` in order.
+/// The standard stage `name` with its RON parameters, built as a scenario would build
+/// it (not set up), or the registry's refusal.
+pub(crate) fn built(name: &str, params: &str) -> Result<Box<dyn Stage>, String> {
+    let options = sph_core::registry::ron_options();
+    let mut de = ron::Deserializer::from_str_with_options(params, &options).unwrap();
+    let mut erased = <dyn erased_serde::Deserializer>::erase(&mut de);
+    match crate::standard_registry().build(name, &mut erased) {
+        Some(Ok(built)) => Ok(built.stage),
+        Some(Err(e)) => Err(e.to_string()),
+        None => Err(format!("no standard stage {name}")),
+    }
+}
+
+/// [`built`], which must succeed.
+pub(crate) fn stage(name: &str, params: &str) -> Box<dyn Stage> {
+    built(name, params).unwrap_or_else(|e| panic!("{name}: {params} refused: {e}"))
+}
+
+/// The standard stages `(name, RON parameters)`, built as [`stage`] builds them and set
+/// up on `sim` in order.
 pub(crate) fn pipeline(sim: &mut Sim, stages: &[(&str, &str)]) -> Vec<Box<dyn Stage>> {
-    let registry = crate::standard_registry();
     let mut built: Vec<Box<dyn Stage>> = stages
         .iter()
-        .map(|(name, params)| {
-            let options = sph_core::registry::ron_options();
-            let mut de = ron::Deserializer::from_str_with_options(params, &options).unwrap();
-            let mut erased = <dyn erased_serde::Deserializer>::erase(&mut de);
-            registry.build(name, &mut erased).unwrap().unwrap().stage
-        })
+        .map(|(name, params)| stage(name, params))
         .collect();
     for stage in &mut built {
         stage.setup(sim).unwrap();

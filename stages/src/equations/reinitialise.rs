@@ -429,18 +429,7 @@ mod tests {
     #[test]
     fn the_filter_declares_the_lists_and_the_momentum_pass_sums_it_reads() {
         use sph_core::contract::{check, Breach, Quantity};
-        let registry = crate::standard_registry();
-        let access = |name: &str, params: &str| {
-            let options = sph_core::registry::ron_options();
-            let mut de = ron::Deserializer::from_str_with_options(params, &options).unwrap();
-            let mut erased = <dyn erased_serde::Deserializer>::erase(&mut de);
-            registry
-                .build(name, &mut erased)
-                .unwrap()
-                .unwrap()
-                .stage
-                .access()
-        };
+        let access = |name: &str, params: &str| crate::testing::stage(name, params).access();
         let grid = access("neighbour_grid", "()");
         let forces = access("forces", "(terms: [RiemannPressure(), Continuity()])");
         let fused = access("reinitialise", "(filter: FreeSurface, sums: Forces)");

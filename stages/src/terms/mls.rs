@@ -128,18 +128,27 @@ mod tests {
     use super::*;
     use sph_core::kernel::{Kernel, Wendland};
 
-    /// A lattice patch around the origin with a linear density field, cut at y = cut
-    /// (a free surface through or above the particle).
+    /// A jittered lattice patch around the origin with a linear density field, cut
+    /// along the diagonal x + 2 y = cut (a free surface through or above the particle),
+    /// so that no sum of A vanishes by symmetry.
     fn filtered(cut: f64) -> (f64, f64, f64) {
         let (ds, h) = (0.01, 0.013);
         let k = Wendland::new(h);
         let rho = |p: DVec2| 1000.0 - 3000.0 * p.y + 500.0 * p.x; // denser below
         let xi = DVec2::ZERO;
         let mut s = MlsSums::default();
-        for i in -4..=4 {
-            for j in -4..=4 {
-                let p = DVec2::new(i as f64, j as f64) * ds;
-                if p.y > cut + 1e-12 {
+        s.add(DVec2::ZERO, k.w(0.0), rho(xi) * ds * ds, rho(xi));
+        let mut state = 7u64;
+        let mut jitter = move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.3 * ds
+        };
+        for i in -4i32..=4 {
+            for j in -4i32..=4 {
+                let p = DVec2::new(i as f64, j as f64) * ds + DVec2::new(jitter(), jitter());
+                if (i, j) == (0, 0) || p.x + 2.0 * p.y > cut + 1e-12 {
                     continue;
                 }
                 let r = rho(p);
@@ -169,5 +178,30 @@ mod tests {
         let mut s = MlsSums::default();
         s.add(DVec2::ZERO, 1.0, 0.1, 990.0);
         assert_eq!(s.mls(), 990.0);
+    }
+
+    /// Neighbours nearly on a slanted line (a thin jet): A is near singular, det(A) /
+    /// (A_00 A_11 A_22) below the threshold but above 0, and the Shepard value is
+    /// kept; spread out a little more, above the threshold, MLS takes over.
+    #[test]
+    fn a_nearly_collinear_neighbourhood_keeps_its_shepard_value() {
+        let condition = |spread: f64| {
+            let mut s = MlsSums::default();
+            for (k, x) in [-0.02, -0.01, 0.0, 0.01, 0.02].into_iter().enumerate() {
+                let y = 0.5 * x + spread * [1.0, -1.0, 0.0, 1.0, -1.0][k];
+                let rho = 990.0 + 10.0 * k as f64;
+                s.add(DVec2::new(x, y), 1.0 - 20.0 * x.abs(), 0.1, rho);
+            }
+            let [a00, a01, a02, a11, a12, a22] = s.a;
+            let det = a00 * (a11 * a22 - a12 * a12) - a01 * (a01 * a22 - a12 * a02)
+                + a02 * (a01 * a12 - a11 * a02);
+            (det / (a00 * a11 * a22), s.mls(), s.shepard())
+        };
+        let (thin, mls, shepard) = condition(1e-4);
+        assert!(thin > 0.0 && thin < MIN_CONDITION, "{thin}");
+        assert_eq!(mls, shepard);
+        let (wide, mls, shepard) = condition(5e-3);
+        assert!(wide > MIN_CONDITION, "{wide}");
+        assert!((mls - shepard).abs() > 1e-6, "{mls} against {shepard}");
     }
 }

@@ -185,20 +185,33 @@ fn rest_walls(world: &hecs::World) -> Vec<WallPose> {
 /// rows behind it, round(length / ds) particles along it (spaced length / n, so the
 /// band ends at the wall's ends), and for each convex corner of two walls on one body
 /// the `layers` x `layers` parallelogram behind both, on the spacing ds along each
-/// normal.
+/// normal. At a reentrant corner (a step: inner angle above 180 degrees) the two
+/// bands overlap behind both walls; the second wall's band leaves that overlap to the
+/// first's, so it is filled once.
 fn lay_out(rest: &[WallPose], walls: &Walls, ds: f64, layers: usize) -> (Vec<Site>, Vec<f64>) {
     let (mut sites, mut volumes) = (Vec::new(), Vec::new());
     let lines: Vec<WallLine> = rest.iter().map(WallLine::of).collect();
+    let depth = layers as f64 * ds;
+    // In wall k's band: behind its line, within the band's depth, alongside it.
+    let in_band = |k: usize, x: DVec2| lines[k].behind(x) && lines[k].distance(x) > -depth;
     for (k, line) in lines.iter().enumerate() {
         let n = ((line.length / ds).round() as usize).max(1);
         let along = line.length / n as f64;
+        // The earlier walls this one meets at a reentrant corner on the same body.
+        let yields: Vec<usize> = walls
+            .corners()
+            .iter()
+            .filter(|c| !c.convex && c.second == k && rest[c.first].body == rest[k].body)
+            .map(|c| c.first)
+            .collect();
         for i in 0..n {
             for l in 0..layers {
-                sites.push(Site {
-                    wall: k,
-                    rest: line.a + (i as f64 + 0.5) * along * line.tangent
-                        - (l as f64 + 0.5) * ds * line.normal,
-                });
+                let x = line.a + (i as f64 + 0.5) * along * line.tangent
+                    - (l as f64 + 0.5) * ds * line.normal;
+                if yields.iter().any(|&f| in_band(f, x)) {
+                    continue;
+                }
+                sites.push(Site { wall: k, rest: x });
                 volumes.push(along * ds);
             }
         }
@@ -237,6 +250,7 @@ fn intersection(a: &WallLine, b: &WallLine) -> Option<DVec2> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use sph_core::world::column;
 
     fn line(a: (f64, f64), b: (f64, f64)) -> WallPose {
         WallPose {
@@ -279,6 +293,186 @@ mod tests {
         }
     }
 
+    /// Laid out at rest, and after the box has turned and moved, each wall particle
+    /// sits where the body carries its rest place and moves with the body's rigid
+    /// velocity there; by default the band is one kernel support deep, ceil(2h / ds)
+    /// = 3 layers at h = 1.3 ds.
+    #[test]
+    fn the_wall_particles_ride_with_their_body() {
+        let mut world = hecs::World::new();
+        crate::testing::closed_box(&mut world, 0.2, 0.1);
+        let mut sim = crate::testing::sim(world);
+        let mut stages = crate::testing::pipeline(&mut sim, &[("wall_particles", "()")]);
+        let rest: Vec<DVec2> = {
+            let ghost = archetype::<Ghost>(&sim.world).unwrap();
+            column::<Position>(ghost)
+                .unwrap()
+                .iter()
+                .map(|x| x.0)
+                .collect()
+        };
+        // 20 + 10 + 20 + 10 sites along the walls, 3 deep, and 3 x 3 in each corner.
+        assert_eq!(rest.len(), 60 * 3 + 4 * 9);
+        let pose = sph_core::motion::Pose {
+            pivot: DVec2::new(0.1, 0.0),
+            state: sph_core::motion::RigidState {
+                angle: 0.3,
+                omega: -0.8,
+                offset: DVec2::new(0.02, -0.01),
+                velocity: DVec2::new(0.3, 0.1),
+                ..Default::default()
+            },
+        };
+        for wall in sim.world.query_mut::<&mut WallPose>() {
+            (wall.a, wall.b, wall.body) = (pose.to_world(wall.a), pose.to_world(wall.b), pose);
+        }
+        stages[0].run(&mut sim).unwrap();
+        let ghost = archetype::<Ghost>(&sim.world).unwrap();
+        let (x, v) = (
+            column::<Position>(ghost).unwrap(),
+            column::<Velocity>(ghost).unwrap(),
+        );
+        let ghost = archetype::<Ghost>(&sim.world).unwrap();
+        for m in column::<Mass>(ghost).unwrap().iter() {
+            // rho_0 times the site's volume, ds^2 in a box.
+            assert!((m.0 - 1000.0 * 1e-4).abs() < 1e-12, "{}", m.0);
+        }
+        for k in 0..rest.len() {
+            let at = pose.to_world(rest[k]);
+            assert!((x[k].0 - at).length() < 1e-12, "{} against {at}", x[k].0);
+            let u = pose.velocity_at(at);
+            assert!((v[k].0 - u).length() < 1e-12, "{} against {u}", v[k].0);
+        }
+    }
+
+    /// The stage refuses zero layers (at the field), a scene without walls, and a
+    /// world that already holds ghosts (mirrors), each with what to do instead; and
+    /// the contract check refuses it beside `GhostWalls`, the other writer of ghosts.
+    #[test]
+    fn the_stage_refuses_no_layers_no_walls_and_mirrors_already_there() {
+        use sph_core::contract::{check, Breach, Quantity};
+        let (walls, mirrors) = (
+            crate::testing::stage("wall_particles", "()").access(),
+            crate::testing::stage("ghost_walls", "()").access(),
+        );
+        assert!(matches!(
+            check([(&mirrors, 1), (&walls, 1)]),
+            Err(Breach::TwoWriters { quantity, first: 0, second: 1 }) if quantity == Quantity::of::<Ghost>()
+        ));
+        let e = crate::testing::built("wall_particles", "(layers: 0)")
+            .err()
+            .unwrap();
+        assert!(e.contains("layers") && e.contains("at least 1"), "{e}");
+        let mut sim = crate::testing::sim(hecs::World::new());
+        let e = crate::testing::stage("wall_particles", "()")
+            .setup(&mut sim)
+            .unwrap_err();
+        assert!(e.to_string().contains("no walls"), "{e}");
+        let mut world = hecs::World::new();
+        crate::testing::closed_box(&mut world, 0.2, 0.1);
+        world.spawn((Ghost { source: 0 }, Position(DVec2::new(0.1, -0.005))));
+        let mut sim = crate::testing::sim(world);
+        let e = crate::testing::stage("wall_particles", "()")
+            .setup(&mut sim)
+            .unwrap_err();
+        assert!(e.to_string().contains("not both"), "{e}");
+    }
+
+    /// The walls of a closed polygon through `corners` (counter-clockwise, so the
+    /// fluid is inside), wall k on the body `body(k)`, with the sites and volumes
+    /// `lay_out` gives them at spacing `ds`, 3 layers deep.
+    fn polygon(
+        corners: &[(f64, f64)],
+        body: impl Fn(usize) -> sph_core::motion::Pose,
+        ds: f64,
+    ) -> (Vec<Site>, Vec<f64>, Walls) {
+        let mut world = hecs::World::new();
+        for k in 0..corners.len() {
+            let (a, b) = (corners[k], corners[(k + 1) % corners.len()]);
+            let rest = Wall {
+                name: format!("w{k}"),
+                a: DVec2::new(a.0, a.1),
+                b: DVec2::new(b.0, b.1),
+                body: body(k),
+            };
+            let now = rest.at_rest();
+            world.spawn((rest, now));
+        }
+        let walls = Walls::of(&world);
+        let (sites, volumes) = lay_out(&rest_walls(&world), &walls, ds, 3);
+        (sites, volumes, walls)
+    }
+
+    /// No two sites closer than the spacing (nothing laid twice).
+    fn apart(sites: &[Site], ds: f64) {
+        for (i, a) in sites.iter().enumerate() {
+            for b in &sites[i + 1..] {
+                assert!(a.rest.distance(b.rest) > ds - 1e-9, "{} {}", a.rest, b.rest);
+            }
+        }
+    }
+
+    /// A step in the floor (an L-shaped tank): at the reentrant corner the two walls'
+    /// bands overlap behind both, and the overlap is laid once; the convex corners get
+    /// their 3 x 3 squares, the reentrant one none.
+    #[test]
+    fn a_reentrant_corner_is_filled_once() {
+        let ds = 0.01;
+        let corners = [
+            (0.0, 0.0),
+            (0.3, 0.0),
+            (0.3, 0.2),
+            (0.1, 0.2),
+            (0.1, 0.1),
+            (0.0, 0.1),
+        ];
+        let (sites, _, walls) = polygon(&corners, |_| Default::default(), ds);
+        assert_eq!(walls.corners().iter().filter(|c| !c.convex).count(), 1);
+        apart(&sites, ds);
+        // 30 + 20 + 20 + 10 + 10 + 10 sites along the walls, 3 deep, less the 3 x 3
+        // overlap, and 3 x 3 behind each of the five convex corners.
+        assert_eq!(sites.len(), 100 * 3 - 9 + 5 * 9);
+    }
+
+    /// A corner where walls of two bodies meet (a piston standing on the floor) is not
+    /// filled: its parallelogram would ride with neither.
+    #[test]
+    fn a_corner_of_two_bodies_is_not_filled() {
+        let piston = sph_core::motion::Pose::at_rest(DVec2::new(0.3, 0.0));
+        let box_ = [(0.0, 0.0), (0.2, 0.0), (0.2, 0.1), (0.0, 0.1)];
+        let (sites, _, _) = polygon(
+            &box_,
+            |k| if k == 3 { piston } else { Default::default() },
+            0.01,
+        );
+        // The left wall (k = 3) meets the floor and the top: two corners left out.
+        assert_eq!(sites.len(), 60 * 3 + 2 * 9);
+    }
+
+    /// At a corner that is not square each corner site holds ds^2 |n_a x n_b|, the
+    /// parallelogram its two normals span (a parallelogram tank, walls at 63.4 and
+    /// 116.6 degrees).
+    #[test]
+    fn a_slanted_corner_s_sites_hold_their_parallelogram() {
+        let ds = 0.01;
+        let corners = [(0.0, 0.0), (0.2, 0.0), (0.25, 0.1), (0.05, 0.1)];
+        let (_, volumes, walls) = polygon(&corners, |_| Default::default(), ds);
+        let sine = 0.1 / 0.05f64.hypot(0.1);
+        let along: usize = walls
+            .lines()
+            .iter()
+            .map(|l| (l.length / ds).round() as usize * 3)
+            .sum();
+        assert_eq!(volumes.len(), along + 4 * 9);
+        for v in &volumes[along..] {
+            assert!(
+                (v - ds * ds * sine).abs() < 1e-15,
+                "{v} against {}",
+                ds * ds * sine
+            );
+        }
+    }
+
     #[test]
     fn two_lines_cross_where_both_pass() {
         let (a, b) = (
@@ -287,6 +481,10 @@ mod tests {
         );
         let x = intersection(&a, &b).unwrap();
         assert!((x - DVec2::new(0.3, 0.0)).length() < 1e-12, "{x}");
+        // A slanted line crosses at y = 0 half-way up its rise.
+        let slant = WallLine::of(&line((0.3, -1.0), (0.8, 1.0)));
+        let x = intersection(&a, &slant).unwrap();
+        assert!((x - DVec2::new(0.55, 0.0)).length() < 1e-12, "{x}");
         let c = WallLine::of(&line((0.0, 1.0), (1.0, 1.0)));
         assert!(intersection(&a, &c).is_none());
     }

@@ -473,9 +473,23 @@ mod tests {
     /// lower left corner whose pressures (-300 to +1,700 Pa), densities and velocities
     /// vary from particle to particle, after `WallParticles`, `NeighbourGrid` and
     /// `WallPressure` with `params` have run once.
-    fn block_in_the_corner(params: &str) -> Sim {
+    fn block_in_the_corner(params: &str, moving: bool) -> Sim {
         let mut world = hecs::World::new();
         crate::testing::closed_box(&mut world, 0.2, 0.2);
+        if moving {
+            // At its rest place this instant, but translating, turning and
+            // accelerating both ways: v_b and a_w differ from one wall particle to
+            // the next.
+            for wall in world.query_mut::<&mut WallPose>() {
+                wall.body.state = sph_core::motion::RigidState {
+                    omega: 0.7,
+                    alpha: -3.0,
+                    velocity: DVec2::new(0.25, -0.15),
+                    acceleration: DVec2::new(1.5, 2.0),
+                    ..Default::default()
+                };
+            }
+        }
         for a in 0..6 {
             for b in 0..4 {
                 let k = (7 * a + 3 * b) % 11;
@@ -504,7 +518,8 @@ mod tests {
 
     /// Each wall particle's pressure, density and two velocities are the formulas of
     /// the module's comment, summed here by a plain loop over the fluid within the
-    /// support (the box is at rest: v_b = a_w = 0), for Adami et al.'s eq. 27, the
+    /// support, in a box at rest and in one that moves (v_b and a_w the rigid
+    /// velocity and acceleration of the box at the wall particle), for Adami et al.'s eq. 27, the
     /// one-sided carry, each slip, `mirror` and `separation`: W the kernel, u_f =
     /// sum v_f W / sum W, t and n the wall's tangent and normal; the density is Tait's
     /// of the pressure. Relative 1e-9 (the order of addition); a wall particle with no
@@ -512,7 +527,7 @@ mod tests {
     /// wall particle that took the other wall's tangent would fail.
     #[test]
     fn the_wall_pressure_and_velocities_are_their_formulas() {
-        for params in [
+        for (params, moving) in [
             "()",
             "(one_sided: true)",
             "(slip: NoSlip)",
@@ -520,8 +535,11 @@ mod tests {
             "(mirror: true)",
             "(mirror: true, slip: NoSlip)",
             "(separation: true)",
-        ] {
-            let sim = block_in_the_corner(params);
+        ]
+        .into_iter()
+        .flat_map(|p| [(p, false), (p, true)])
+        {
+            let sim = block_in_the_corner(params, moving);
             let c = &sim.constants;
             let (support, g, eos, kind, h) = (c.support(), c.gravity, c.eos, c.kernel, c.h);
             let fluid = archetype::<Fluid>(&sim.world).unwrap();
@@ -546,6 +564,11 @@ mod tests {
             for k in 0..gx.len() {
                 let wall = sim.world.get::<&WallPose>(gw[k].0).unwrap();
                 let (t, n) = (wall.tangent(), wall.normal());
+                let (v_b, a_w) = (
+                    wall.body.velocity_at(gx[k].0),
+                    wall.body.acceleration_at(gx[k].0),
+                );
+                assert_eq!(moving, v_b != DVec2::ZERO && a_w != DVec2::ZERO);
                 let (mut sw, mut spw, mut carry, mut raised, mut svw) =
                     (0.0, 0.0, 0.0, 0.0, DVec2::ZERO);
                 for f in 0..fx.len() {
@@ -556,8 +579,8 @@ mod tests {
                     let w = sph_core::kernel::w(kind, h, r.length());
                     sw += w;
                     spw += fp[f].0 * w;
-                    carry += fr[f].0 * g.dot(r) * w;
-                    raised += (fr[f].0 * g.dot(r)).max(0.0) * w;
+                    carry += fr[f].0 * (g - a_w).dot(r) * w;
+                    raised += (fr[f].0 * (g - a_w).dot(r)).max(0.0) * w;
                     svw += fv[f].0 * w;
                 }
                 if sw == 0.0 {
@@ -576,16 +599,16 @@ mod tests {
                 assert!(close(gr[k].0, eos.density(p)), "{params}: density");
                 let u = svw / sw;
                 let mut visc = match params {
-                    "(slip: NoSlip)" | "(mirror: true, slip: NoSlip)" => -u,
-                    "(slip: WallVelocity)" => DVec2::ZERO,
-                    _ => u.dot(t) * t,
+                    "(slip: NoSlip)" | "(mirror: true, slip: NoSlip)" => 2.0 * v_b - u,
+                    "(slip: WallVelocity)" => v_b,
+                    _ => v_b + (u - v_b).dot(t) * t,
                 };
-                let mut v = DVec2::ZERO;
+                let mut v = v_b;
                 if params.starts_with("(mirror") {
-                    v = -u.dot(n) * n;
-                    visc = visc - (visc.dot(n) + u.dot(n)) * n;
+                    v = v_b - (u - v_b).dot(n) * n;
+                    visc = visc - ((visc - v_b).dot(n) + (u - v_b).dot(n)) * n;
                 } else if params == "(separation: true)" {
-                    v = u.dot(n).max(0.0) * n;
+                    v = v_b + (u - v_b).dot(n).max(0.0) * n;
                 }
                 let near = |a: DVec2, b: DVec2| close(a.x, b.x) && close(a.y, b.y);
                 assert!(
@@ -603,6 +626,98 @@ mod tests {
                 floor >= 10 && side >= 8,
                 "{params}: {floor} floor, {side} side wall particles wetted"
             );
+        }
+    }
+
+    /// One wall particle (a wall one spacing long, one layer) and one fluid particle
+    /// above it, whose only wall neighbour is therefore the first ghost: the wall
+    /// particle takes Adami's eq. 27 of that one particle, p_f + rho_f g . (x_w - x_f).
+    #[test]
+    fn a_lone_wall_particle_takes_its_lone_fluid_neighbour_s_pressure() {
+        let mut world = hecs::World::new();
+        let rest = sph_core::components::Wall {
+            name: "floor".into(),
+            a: DVec2::ZERO,
+            b: DVec2::new(0.01, 0.0),
+            body: Default::default(),
+        };
+        let now = rest.at_rest();
+        world.spawn((rest, now));
+        let xf = DVec2::new(0.005, 0.005);
+        world.spawn((
+            Fluid,
+            Position(xf),
+            Velocity(DVec2::ZERO),
+            Density(1000.0),
+            Pressure(700.0),
+            Mass(0.1),
+        ));
+        let sim = crate::testing::after_one_step(
+            world,
+            &[
+                ("wall_particles", "(layers: 1)"),
+                ("neighbour_grid", "()"),
+                ("wall_pressure", "()"),
+            ],
+        );
+        let ghost = archetype::<Ghost>(&sim.world).unwrap();
+        let (x, p) = (
+            column::<Position>(ghost).unwrap(),
+            column::<Pressure>(ghost).unwrap(),
+        );
+        assert_eq!(x.len(), 1);
+        let expected = 700.0 + 1000.0 * sim.constants.gravity.dot(x[0].0 - xf);
+        assert!(
+            (p[0].0 - expected).abs() < 1e-9 * expected,
+            "{} against {expected}",
+            p[0].0
+        );
+    }
+
+    /// The stage needs the neighbour lists: set up without the grid it is refused by
+    /// name, and the contract check refuses it listed before the grid. With two
+    /// velocities it declares the walls' no-slip velocities as a column from setup on
+    /// (a stage set up after it reads the column to pick its pair layout), and with
+    /// `single_velocity` none.
+    #[test]
+    fn the_wall_pressure_needs_the_lists_and_declares_its_second_velocity() {
+        use sph_core::contract::{check, Breach, Quantity};
+        let boxed = || {
+            let mut world = hecs::World::new();
+            crate::testing::closed_box(&mut world, 0.2, 0.2);
+            crate::testing::sim(world)
+        };
+        let mut sim = boxed();
+        crate::testing::pipeline(&mut sim, &[("wall_particles", "()")]);
+        let e = crate::testing::stage("wall_pressure", "()")
+            .setup(&mut sim)
+            .unwrap_err();
+        assert!(e.to_string().contains("wall_pressure"), "{e}");
+        let (grid, walls) = (
+            crate::testing::stage("neighbour_grid", "()").access(),
+            crate::testing::stage("wall_pressure", "()").access(),
+        );
+        assert!(matches!(
+            check([(&walls, 1), (&grid, 1)]),
+            Err(Breach::Unwritten { quantity, reader: 0, .. }) if quantity == Quantity::of::<Neighbours>()
+        ));
+        for single in [false, true] {
+            let mut sim = boxed();
+            let params = format!("(single_velocity: {single})");
+            crate::testing::pipeline(
+                &mut sim,
+                &[
+                    ("wall_particles", "()"),
+                    ("neighbour_grid", "()"),
+                    ("wall_pressure", &params),
+                ],
+            );
+            let column = sim
+                .resources
+                .get::<Columns>()
+                .is_some_and(|c| c.contains::<NoSlipVelocity>());
+            assert_eq!(column, !single, "{params}");
+            assert!(sim.resources.get::<NoSlipSigns>().is_some());
         }
     }
 
@@ -649,7 +764,16 @@ mod tests {
     /// hand; a wall particle with no fluid near keeps 0.
     #[test]
     fn the_largest_carried_pressure_is_what_the_wall_takes() {
-        let pressure = |k| [300.0, -500.0, 100.0, 2000.0, 50.0][k];
+        // A mixed row, and one wholly in tension (the largest is then below 0).
+        for pressure in [
+            |k| [300.0, -500.0, 100.0, 2000.0, 50.0][k],
+            |k| [-300.0, -500.0, -800.0, -2000.0, -650.0][k],
+        ] {
+            largest_carried(pressure);
+        }
+    }
+
+    fn largest_carried(pressure: fn(usize) -> f64) {
         let sim = row_on_the_floor(pressure, DVec2::ZERO, "(largest: true)");
         let support = sim.constants.support();
         let g = sim.constants.gravity;
