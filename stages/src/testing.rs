@@ -32,13 +32,23 @@ pub(crate) fn sim(world: hecs::World) -> Sim {
 /// counter-clockwise so that the fluid is inside.
 pub(crate) fn closed_box(world: &mut hecs::World, width: f64, height: f64) {
     let corners = [(0.0, 0.0), (width, 0.0), (width, height), (0.0, height)];
-    for k in 0..4 {
-        let (a, b) = (corners[k], corners[(k + 1) % 4]);
+    closed_polygon(world, &corners, |_| Default::default());
+}
+
+/// The walls of a closed polygon through `corners` (counter-clockwise, so that the
+/// fluid is inside), wall k from corner k to the next, at rest on the body `body(k)`.
+pub(crate) fn closed_polygon(
+    world: &mut hecs::World,
+    corners: &[(f64, f64)],
+    body: impl Fn(usize) -> sph_core::motion::Pose,
+) {
+    for k in 0..corners.len() {
+        let (a, b) = (corners[k], corners[(k + 1) % corners.len()]);
         let rest = Wall {
             name: format!("w{k}"),
             a: DVec2::new(a.0, a.1),
             b: DVec2::new(b.0, b.1),
-            body: Default::default(),
+            body: body(k),
         };
         let now = rest.at_rest();
         world.spawn((rest, now));

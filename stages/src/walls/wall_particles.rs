@@ -286,11 +286,7 @@ mod tests {
             assert!((v - ds * ds).abs() < 1e-15, "{x}: volume {v}");
         }
         // No two sites closer than the spacing: the corners are not filled twice.
-        for (i, a) in sites.iter().enumerate() {
-            for b in &sites[i + 1..] {
-                assert!(a.rest.distance(b.rest) > ds - 1e-9, "{} {}", a.rest, b.rest);
-            }
-        }
+        apart(&sites, ds);
     }
 
     /// Laid out at rest, and after the box has turned and moved, each wall particle
@@ -387,17 +383,7 @@ mod tests {
         ds: f64,
     ) -> (Vec<Site>, Vec<f64>, Walls) {
         let mut world = hecs::World::new();
-        for k in 0..corners.len() {
-            let (a, b) = (corners[k], corners[(k + 1) % corners.len()]);
-            let rest = Wall {
-                name: format!("w{k}"),
-                a: DVec2::new(a.0, a.1),
-                b: DVec2::new(b.0, b.1),
-                body: body(k),
-            };
-            let now = rest.at_rest();
-            world.spawn((rest, now));
-        }
+        crate::testing::closed_polygon(&mut world, corners, body);
         let walls = Walls::of(&world);
         let (sites, volumes) = lay_out(&rest_walls(&world), &walls, ds, 3);
         (sites, volumes, walls)

@@ -439,10 +439,16 @@ mod tests {
                 Mass(0.1),
             ));
         }
+        lined(world, "()", params)
+    }
+
+    /// `world` after `WallParticles(layers)`, `NeighbourGrid()` and
+    /// `WallPressure(params)` have been set up and run once.
+    fn lined(world: hecs::World, layers: &str, params: &str) -> Sim {
         crate::testing::after_one_step(
             world,
             &[
-                ("wall_particles", "()"),
+                ("wall_particles", layers),
                 ("neighbour_grid", "()"),
                 ("wall_pressure", params),
             ],
@@ -506,14 +512,7 @@ mod tests {
                 ));
             }
         }
-        crate::testing::after_one_step(
-            world,
-            &[
-                ("wall_particles", "()"),
-                ("neighbour_grid", "()"),
-                ("wall_pressure", params),
-            ],
-        )
+        lined(world, "()", params)
     }
 
     /// Each wall particle's pressure, density and two velocities are the formulas of
@@ -652,14 +651,7 @@ mod tests {
             Pressure(700.0),
             Mass(0.1),
         ));
-        let sim = crate::testing::after_one_step(
-            world,
-            &[
-                ("wall_particles", "(layers: 1)"),
-                ("neighbour_grid", "()"),
-                ("wall_pressure", "()"),
-            ],
-        );
+        let sim = lined(world, "(layers: 1)", "()");
         let ghost = archetype::<Ghost>(&sim.world).unwrap();
         let (x, p) = (
             column::<Position>(ghost).unwrap(),
