@@ -1,7 +1,7 @@
 //! Worlds for the stages' unit tests.
 
 use glam::DVec2;
-use sph_core::components::Wall;
+use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure, Velocity, Wall};
 use sph_core::kernel::KernelKind;
 use sph_core::sim::{Clock, Constants, Resources, Sim, Tait};
 use sph_core::stage::Stage;
@@ -95,4 +95,55 @@ pub(crate) fn after_one_step(world: hecs::World, stages: &[(&str, &str)]) -> Sim
         stage.run(&mut sim).unwrap();
     }
     sim
+}
+
+/// Every particle of the world, fluid then ghosts: position, velocity, mass, density,
+/// pressure (for the tests' brute-force sums over every particle).
+pub(crate) fn everyone(sim: &Sim) -> Vec<(DVec2, DVec2, f64, f64, f64)> {
+    use sph_core::world::{archetype, column};
+    let mut all = Vec::new();
+    for a in [
+        archetype::<Fluid>(&sim.world),
+        archetype::<Ghost>(&sim.world),
+    ]
+    .into_iter()
+    .flatten()
+    {
+        let (x, v, m) = (
+            column::<Position>(a).unwrap(),
+            column::<Velocity>(a).unwrap(),
+            column::<Mass>(a).unwrap(),
+        );
+        let (rho, p) = (
+            column::<Density>(a).unwrap(),
+            column::<Pressure>(a).unwrap(),
+        );
+        for k in 0..x.len() {
+            all.push((x[k].0, v[k].0, m[k].0, rho[k].0, p[k].0));
+        }
+    }
+    all
+}
+
+/// A fresh, empty output folder for the test `name` (in the system's temporary
+/// folder, apart for each test process).
+pub(crate) fn out_dir(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("sph_unit_{name}_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// The sites of an `nx` x `ny` block of particles at spacing 0.01 m from a box's
+/// bottom left corner (the first at (0.005, 0.005)), with their column and row.
+pub(crate) fn lattice(nx: usize, ny: usize) -> impl Iterator<Item = (usize, usize, DVec2)> {
+    (0..nx).flat_map(move |a| {
+        (0..ny).map(move |b| {
+            (
+                a,
+                b,
+                DVec2::new(0.005 + 0.01 * a as f64, 0.005 + 0.01 * b as f64),
+            )
+        })
+    })
 }

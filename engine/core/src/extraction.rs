@@ -201,6 +201,69 @@ mod tests {
         );
     }
 
+    /// A list reads each name once, in order; a name twice, a bare name and a wrong
+    /// element are refused saying what was expected.
+    #[test]
+    fn method_lists_read_each_name_once() {
+        use serde::de::DeserializeSeed;
+        let mut r = registry();
+        r.0.insert("Averaged", (|| Box::new(Zero), "test"));
+        let read = |text: &str| {
+            let mut de = ron::Deserializer::from_str(text).unwrap();
+            MethodListSeed(&r)
+                .deserialize(&mut de)
+                .map_err(|e| e.to_string())
+        };
+        assert_eq!(
+            read("[Averaged, PeakHold]"),
+            Ok(vec![MethodName("Averaged"), MethodName("PeakHold")])
+        );
+        assert_eq!(read("[]"), Ok(vec![]));
+        let twice = read("[PeakHold, Averaged, PeakHold]").unwrap_err();
+        assert!(twice.contains("`PeakHold` is listed twice"), "{twice}");
+        assert!(read("PeakHold").is_err());
+        assert!(read("[3]").is_err());
+        // RON words these itself; a format that asks the visitor what it expected
+        // (serde's own value deserializer here) gets the seeds' words.
+        use serde::de::value::{Error, U32Deserializer};
+        let three = || U32Deserializer::<Error>::new(3);
+        let list = MethodListSeed(&r).deserialize(three()).unwrap_err();
+        assert!(
+            list.to_string()
+                .ends_with("expected a list of extraction methods, e.g. `[Shepard, Averaged]`"),
+            "{list}"
+        );
+        let truth = serde::de::value::BoolDeserializer::<Error>::new(true);
+        let one = MethodSeed(&r).deserialize(truth).unwrap_err();
+        assert!(
+            one.to_string()
+                .ends_with("expected an extraction method, e.g. Averaged"),
+            "{one}"
+        );
+    }
+
+    /// A site's point lies `along` the wall from its end `a`; a method reads no grid
+    /// unless it says so.
+    #[test]
+    fn a_site_is_a_point_along_its_wall() {
+        let wall = WallPose {
+            a: DVec2::new(1.0, 2.0),
+            b: DVec2::new(4.0, 6.0),
+            body: Default::default(),
+        };
+        let site = Site {
+            wall: &wall,
+            along: 2.5,
+            width: 0.01,
+            carry: Carry {
+                rho0: 1000.0,
+                g: DVec2::ZERO,
+            },
+        };
+        assert!((site.point() - DVec2::new(2.5, 4.0)).length() < 1e-15);
+        assert!(!Zero.needs_grid());
+    }
+
     #[test]
     fn the_carry_adds_the_hydrostatic_difference() {
         let c = Carry {

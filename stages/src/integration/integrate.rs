@@ -216,10 +216,7 @@ impl Stage for Integrate {
             ));
         }
         // Land exactly on the end time.
-        let remaining = sim.clock.end_time - sim.clock.time;
-        if remaining < 1.5 * dt {
-            dt = dt.min(remaining);
-        }
+        dt = dt.min(sim.clock.end_time - sim.clock.time);
         let first_step = sim.clock.step == 0;
         let kick = if first_step {
             0.5 * dt
@@ -557,5 +554,559 @@ fn unstable(what: &str, i: usize, x: DVec2) -> StepError {
         what: what.to_string(),
         particle: Some(i as u32),
         position: Some(x),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::{closed_box, pipeline, sim};
+    use sph_core::sim::Counter;
+
+    /// One fluid particle's state: position, velocity, density, and the rates the
+    /// force and continuity stages would have written.
+    #[derive(Clone, Copy)]
+    struct Particle {
+        x: DVec2,
+        v: DVec2,
+        rho: f64,
+        a: DVec2,
+        r: f64,
+    }
+
+    fn at(x: (f64, f64), v: (f64, f64)) -> Particle {
+        Particle {
+            x: DVec2::new(x.0, x.1),
+            v: DVec2::new(v.0, v.1),
+            rho: 1000.0,
+            a: DVec2::ZERO,
+            r: 0.0,
+        }
+    }
+
+    const MASS: f64 = 0.1;
+
+    /// A sim with `particles` (mass 0.1 kg/m, with their rate columns) and, if `boxed`,
+    /// the walls of a closed 1 m x 1 m box at rest from the origin; the integrator
+    /// built from `params` and set up on it.
+    fn world(particles: &[Particle], boxed: bool, params: &str) -> (Sim, Box<dyn Stage>) {
+        let mut world = hecs::World::new();
+        if boxed {
+            closed_box(&mut world, 1.0, 1.0);
+        }
+        for p in particles {
+            world.spawn((
+                Fluid,
+                Position(p.x),
+                Velocity(p.v),
+                Density(p.rho),
+                Mass(MASS),
+                Acceleration(p.a),
+                DensityRate(p.r),
+            ));
+        }
+        let mut sim = sim(world);
+        sim.clock.end_time = 10.0;
+        let stage = pipeline(&mut sim, &[("integrate", params)]).remove(0);
+        (sim, stage)
+    }
+
+    fn positions(sim: &Sim) -> Vec<DVec2> {
+        let fluid = archetype::<Fluid>(&sim.world).unwrap();
+        column::<Position>(fluid)
+            .unwrap()
+            .iter()
+            .map(|p| p.0)
+            .collect()
+    }
+    fn velocities(sim: &Sim) -> Vec<DVec2> {
+        let fluid = archetype::<Fluid>(&sim.world).unwrap();
+        column::<Velocity>(fluid)
+            .unwrap()
+            .iter()
+            .map(|v| v.0)
+            .collect()
+    }
+    fn densities(sim: &Sim) -> Vec<f64> {
+        let fluid = archetype::<Fluid>(&sim.world).unwrap();
+        column::<Density>(fluid)
+            .unwrap()
+            .iter()
+            .map(|r| r.0)
+            .collect()
+    }
+    fn guards(sim: &Sim) -> Vec<u8> {
+        let fluid = archetype::<Fluid>(&sim.world).unwrap();
+        column::<Guarded>(fluid)
+            .unwrap()
+            .iter()
+            .map(|g| g.0)
+            .collect()
+    }
+
+    /// The failure of one step: what, which particle, where.
+    fn failure(sim: &mut Sim, stage: &mut Box<dyn Stage>) -> (String, Option<u32>) {
+        match stage.run(sim) {
+            Err(StepError::Unstable { what, particle, .. }) => (what, particle),
+            other => panic!("expected an instability, got {other:?}"),
+        }
+    }
+
+    /// The leapfrog of the module docs integrates a constant acceleration and density
+    /// rate exactly, whatever the steps: x = x0 + v0 t + a t^2/2, v = v0 + a t,
+    /// rho = rho0 + r t. The steps here vary (the density, and so the sound speed,
+    /// rises), which checks the kick (dt_{n-1} + dt_n)/2 between half steps. Bound:
+    /// round-off of 60 steps (1e-12 relative).
+    #[test]
+    fn the_leapfrog_is_exact_under_constant_rates() {
+        let mut ps = [
+            at((0.1, 0.2), (0.5, -0.3)),
+            at((-0.2, 0.4), (-0.1, 0.2)),
+            at((0.3, -0.1), (0.0, 0.0)),
+        ];
+        for (k, p) in ps.iter_mut().enumerate() {
+            p.a = DVec2::new(0.3 - 0.2 * k as f64, -9.81 + k as f64);
+            p.r = 300.0 + 100.0 * k as f64;
+            p.rho = 1000.0 + k as f64;
+        }
+        let (mut sim, mut stage) = world(&ps, false, "()");
+        let mut steps = Vec::new();
+        for _ in 0..60 {
+            stage.run(&mut sim).unwrap();
+            steps.push(sim.clock.dt);
+        }
+        assert!(steps[59] < 0.99 * steps[0], "the steps vary: {steps:?}");
+        let t = sim.clock.time;
+        assert_eq!(sim.clock.step, 60);
+        assert!((t - steps.iter().sum::<f64>()).abs() < 1e-15);
+        let (x, v, rho) = (positions(&sim), velocities(&sim), densities(&sim));
+        for (k, p) in ps.iter().enumerate() {
+            let close = |a: DVec2, b: DVec2| (a - b).length() <= 1e-12 * (1.0 + b.length());
+            let xe = p.x + p.v * t + 0.5 * p.a * t * t;
+            assert!(close(x[k], xe), "x {k}: {} against {xe}", x[k]);
+            let ve = p.v + p.a * t;
+            assert!(close(v[k], ve), "v {k}: {} against {ve}", v[k]);
+            let re = p.rho + p.r * t;
+            assert!(
+                (rho[k] - re).abs() <= 1e-12 * re,
+                "rho {k}: {} against {re}",
+                rho[k]
+            );
+        }
+    }
+
+    /// Without force or continuity stages the particles drift at their velocities.
+    #[test]
+    fn without_rates_the_particles_drift() {
+        let mut world = hecs::World::new();
+        world.spawn((
+            Fluid,
+            Position(DVec2::new(0.1, 0.2)),
+            Velocity(DVec2::new(0.5, -0.25)),
+            Density(1000.0),
+            Mass(MASS),
+        ));
+        let mut sim = sim(world);
+        sim.clock.end_time = 1.0;
+        let mut stage = pipeline(&mut sim, &[("integrate", "()")]).remove(0);
+        for _ in 0..3 {
+            stage.run(&mut sim).unwrap();
+        }
+        let t = sim.clock.time;
+        assert!(t > 0.0);
+        let xe = DVec2::new(0.1 + 0.5 * t, 0.2 - 0.25 * t);
+        assert!((positions(&sim)[0] - xe).length() < 1e-15);
+        assert_eq!(densities(&sim)[0], 1000.0);
+    }
+
+    /// dt = C min( h / (c_max + max|v|), sqrt(h / max|a|) ), at most `max_dt`, with
+    /// c_max the sound speed at the largest density (at least rho_0): each limit in
+    /// turn, the extremes held by the last of 5,000 particles (beyond the first
+    /// parallel chunk). The test sim: h 0.013 m, c_0 20 m/s, gamma 7.
+    #[test]
+    fn the_step_is_the_smallest_of_its_limits() {
+        let (h, c0, courant) = (0.013, 20.0, 0.3);
+        // c(rho) = c_0 (rho/rho_0)^((gamma-1)/2) for Tait (c^2 = dp/drho).
+        let c = |rho: f64| c0 * (rho / 1000.0f64).powf(3.0);
+        let step = |v: f64, a: f64, rho: f64, quiet_rho: f64, max_dt: f64| {
+            let mut ps = vec![at((0.0, 0.0), (0.01, 0.0)); 5000];
+            for p in &mut ps {
+                p.a = DVec2::new(0.0, -1.0);
+                p.rho = quiet_rho;
+            }
+            ps[4500].v = DVec2::new(0.6 * v, -0.8 * v);
+            ps[4500].a = DVec2::new(-0.6 * a, 0.8 * a);
+            ps[4500].rho = rho;
+            let params = format!("(courant: {courant}, max_dt: {max_dt})");
+            let (mut sim, mut stage) = world(&ps, false, &params);
+            stage.run(&mut sim).unwrap();
+            sim.clock.dt
+        };
+        let rel = |a: f64, b: f64| ((a - b) / b).abs();
+        // The sound-speed limit, at a density above rho_0.
+        let dt = step(2.0, 1.0, 1020.0, 1000.0, 1.0);
+        let expected = courant * h / (c(1020.0) + 2.0);
+        assert!(rel(dt, expected) < 1e-14, "{dt} against {expected}");
+        // Densities below rho_0 take c_0.
+        let dt = step(2.0, 1.0, 990.0, 995.0, 1.0);
+        let expected = courant * h / (c0 + 2.0);
+        assert!(rel(dt, expected) < 1e-14, "{dt} against {expected}");
+        // The acceleration limit.
+        let dt = step(2.0, 5e5, 1000.0, 1000.0, 1.0);
+        let expected = courant * (h / 5e5f64).sqrt();
+        assert!(rel(dt, expected) < 1e-14, "{dt} against {expected}");
+        // The largest step.
+        let dt = step(2.0, 1.0, 1000.0, 1000.0, 1e-5);
+        assert_eq!(dt, 1e-5);
+    }
+
+    /// The run lands on the end time exactly: the step is min(dt, remaining), so a
+    /// remainder below a step is taken whole, and 1.2 steps left are a full step and
+    /// then the rest.
+    #[test]
+    fn the_last_step_lands_on_the_end_time() {
+        let ps = [at((0.0, 0.0), (1.0, 0.0))];
+        let (mut sim, mut stage) = world(&ps, false, "()");
+        stage.run(&mut sim).unwrap();
+        let dt = sim.clock.dt;
+        // Less than a step left: it is taken whole.
+        sim.clock.end_time = sim.clock.time + 0.7 * dt;
+        let end = sim.clock.end_time;
+        stage.run(&mut sim).unwrap();
+        assert_eq!(sim.clock.time, end);
+        // 1.2 steps left: a full step, then the 0.2.
+        sim.clock.end_time = sim.clock.time + 1.2 * dt;
+        let end = sim.clock.end_time;
+        stage.run(&mut sim).unwrap();
+        assert!(
+            (sim.clock.dt - dt).abs() < 1e-12 * dt,
+            "{} against {dt}",
+            sim.clock.dt
+        );
+        stage.run(&mut sim).unwrap();
+        assert_eq!(sim.clock.time, end);
+        // Two steps left: untouched.
+        sim.clock.end_time = sim.clock.time + 2.0 * dt;
+        stage.run(&mut sim).unwrap();
+        assert!((sim.clock.dt - dt).abs() < 1e-12 * dt);
+    }
+
+    /// A step below `collapse_fraction` of the first stops the run, naming the particle
+    /// that accelerates most.
+    #[test]
+    fn a_collapsing_step_stops_the_run() {
+        let mut ps = vec![at((0.0, 0.0), (0.0, 0.0)); 4];
+        for p in &mut ps {
+            p.a = DVec2::new(0.0, -9.81);
+        }
+        let (mut sim, mut stage) = world(&ps, false, "(collapse_fraction: 0.01)");
+        stage.run(&mut sim).unwrap();
+        let first = sim.clock.dt;
+        // The first step is the sound-speed limit C h / c_0 = 1.6e-4 s; an acceleration
+        // of 1e10 m/s^2 allows C sqrt(h / a) = 2.9e-7 s, 0.18 % of it.
+        set_acceleration(&mut sim, 2, DVec2::new(0.0, -1e10));
+        let (what, particle) = failure(&mut sim, &mut stage);
+        assert!(what.starts_with("time step collapsed"), "{what}");
+        assert!(what.contains(&format!("{first:.3e}")), "{what}");
+        assert_eq!(particle, Some(2));
+        // 1e8 m/s^2: 2.9e-6 s, 1.8 %, above the fraction.
+        let (mut sim, mut stage) = world(&ps, false, "(collapse_fraction: 0.01)");
+        stage.run(&mut sim).unwrap();
+        set_acceleration(&mut sim, 2, DVec2::new(0.0, -1e8));
+        stage.run(&mut sim).unwrap();
+        assert!(sim.clock.dt < 0.02 * first);
+    }
+
+    fn set_acceleration(sim: &mut Sim, i: usize, a: DVec2) {
+        let fluid = archetype::<Fluid>(&sim.world).unwrap();
+        column_mut::<Acceleration>(fluid).unwrap()[i].0 = a;
+    }
+
+    /// A non-finite rate stops the run before anything moves, naming the rate and the
+    /// particle.
+    #[test]
+    fn a_non_finite_rate_stops_the_run() {
+        let mut ps = vec![at((0.0, 0.0), (0.1, 0.0)); 5];
+        ps[3].a = DVec2::new(f64::NAN, 0.0);
+        let (mut sim, mut stage) = world(&ps, false, "()");
+        assert_eq!(
+            failure(&mut sim, &mut stage),
+            ("non-finite acceleration".to_string(), Some(3))
+        );
+        assert_eq!(positions(&sim)[0], DVec2::ZERO);
+        assert_eq!(sim.clock.step, 0);
+        let mut ps = vec![at((0.0, 0.0), (0.1, 0.0)); 5];
+        ps[1].r = f64::INFINITY;
+        let (mut sim, mut stage) = world(&ps, false, "()");
+        assert_eq!(
+            failure(&mut sim, &mut stage),
+            ("non-finite density rate".to_string(), Some(1))
+        );
+    }
+
+    /// The end-of-step check: a density outside rho_0 (1 +- limit), a particle out of
+    /// the domain, a NaN density, one behind a wall with reflection off; the lowest
+    /// failing index is named, across the parallel chunks.
+    #[test]
+    fn the_end_of_step_check_names_what_failed() {
+        // Density: 1,000 +- 50 % (the default limit) is allowed; the band's ends.
+        let mut ps = vec![at((0.5, 0.5), (0.0, 0.0)); 4200];
+        ps[3000].rho = 1501.0;
+        ps[4100].rho = 1502.0;
+        let (mut sim, mut stage) = world(&ps, false, "()");
+        let (what, particle) = failure(&mut sim, &mut stage);
+        assert_eq!(what, "density 1501.0 kg/m^3 is beyond rho_0 (1 +- 0.5)");
+        assert_eq!(particle, Some(3000));
+        for (rho, ok) in [(1499.0, true), (501.0, true), (499.0, false)] {
+            let mut ps = vec![at((0.5, 0.5), (0.0, 0.0)); 3];
+            ps[1].rho = rho;
+            let (mut sim, mut stage) = world(&ps, false, "()");
+            assert_eq!(stage.run(&mut sim).is_ok(), ok, "rho {rho}");
+        }
+        let (mut sim, mut stage) = world(&ps, false, "(density_limit: 0.6)");
+        stage.run(&mut sim).unwrap();
+        // The domain (the test sim's is -1 to 1 m on both axes).
+        for (dx, dy) in [(1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0)] {
+            let mut ps = vec![at((0.0, 0.0), (0.0, 0.0)); 3];
+            // 1.3 cm in the step C h / (c_0 + |v|): out through the domain's side.
+            ps[1] = at((0.999 * dx, 0.999 * dy), (1000.0 * dx, 1000.0 * dy));
+            let (mut sim, mut stage) = world(&ps, false, "(courant: 1.0)");
+            let v = (dx, dy);
+            assert_eq!(
+                failure(&mut sim, &mut stage),
+                ("particle left the domain".to_string(), Some(1)),
+                "{v:?}"
+            );
+        }
+        // A non-finite density at a finite place.
+        let mut ps = vec![at((0.5, 0.5), (0.0, 0.0)); 3];
+        ps[2].rho = f64::NAN;
+        let (mut sim, mut stage) = world(&ps, false, "()");
+        assert_eq!(
+            failure(&mut sim, &mut stage),
+            ("non-finite position or density".to_string(), Some(2))
+        );
+        // A wall, with reflection off: through the floor.
+        let ps = [at((0.5, 0.5), (0.0, 0.0)), at((0.5, 0.0002), (0.2, -3.0))];
+        let (mut sim, mut stage) = world(&ps, true, "(reflect_at_walls: false)");
+        assert_eq!(
+            failure(&mut sim, &mut stage),
+            ("particle passed through wall `w0`".to_string(), Some(1))
+        );
+    }
+
+    /// A particle behind a wall at the end of its step is mirrored back across it, its
+    /// velocities' normal parts (relative to the wall's) reversed; counted once per
+    /// particle, flagged, its energy change (the potential energy of the mirrored
+    /// height, m g 2|y|, and the kinetic energy a moving wall gives) reported as the
+    /// guards' power; with `restore_density_on_reflection` its density is raised to
+    /// rho_0. Three such particles in three parallel chunks.
+    #[test]
+    fn a_particle_behind_a_wall_is_reflected_and_counted() {
+        // The box at rest, and moving up at 1 m/s (at its rest place this instant):
+        // the normal velocity is reversed relative to the wall's, -3 - 1 to 4 + 1.
+        for (restore, lift) in [(false, 0.0), (true, 0.0), (false, 1.0)] {
+            let mut ps = vec![at((0.5, 0.5), (0.0, 0.0)); 4500];
+            for k in [10, 2100, 4400] {
+                ps[k] = at((0.5, 0.0002), (0.2, -3.0));
+                ps[k].rho = 990.0;
+            }
+            let params = format!("(restore_density_on_reflection: {restore})");
+            let (mut sim, mut stage) = world(&ps, true, &params);
+            for wall in sim.world.query_mut::<&mut WallPose>() {
+                wall.body.state.velocity = DVec2::new(0.0, lift);
+            }
+            sim.resources.insert(GuardPower { power: 0.0 });
+            stage.run(&mut sim).unwrap();
+            let dt = sim.clock.dt;
+            let (x, v, rho, g) = (
+                positions(&sim),
+                velocities(&sim),
+                densities(&sim),
+                guards(&sim),
+            );
+            let behind = 0.0002 - 3.0 * dt;
+            assert!(behind < 0.0);
+            for k in [10, 2100, 4400] {
+                let xe = DVec2::new(0.5 + 0.2 * dt, -behind);
+                assert!((x[k] - xe).length() < 1e-15, "{} against {xe}", x[k]);
+                let ve = DVec2::new(0.2, 3.0 + 2.0 * lift);
+                assert!((v[k] - ve).length() < 1e-12, "{} against {ve}", v[k]);
+                assert_eq!(rho[k], if restore { 1000.0 } else { 990.0 });
+                assert_eq!(g[k], Guarded::REFLECTED);
+            }
+            assert_eq!(g[11], 0);
+            assert_eq!(WallReflections::counted(&sim.diagnostics), 3.0);
+            // Potential m g 2|y| each, the kinetic energy the moving wall gave, and
+            // with the density restored the internal energy m (e(1000) - e(990)) =
+            // -m e(990).
+            let kinetic = 0.5 * ((3.0 + 2.0 * lift).powi(2) - 9.0);
+            let mut de = 3.0 * MASS * (9.81 * 2.0 * (-behind) + kinetic);
+            if restore {
+                de -= 3.0 * MASS * internal_energy(990.0);
+            }
+            let power = sim.resources.get::<GuardPower>().unwrap().power;
+            assert!(
+                (power - de / dt).abs() < 1e-9 * (de / dt).abs(),
+                "{power} against {}",
+                de / dt
+            );
+        }
+    }
+
+    /// Tait's specific internal energy, e = integral from rho_0 to rho of p/rho^2, for
+    /// the test sim's water (B = rho_0 c_0^2 / gamma).
+    fn internal_energy(rho: f64) -> f64 {
+        let (r0, g) = (1000.0f64, 7.0);
+        let b = r0 * 400.0 / g;
+        b * (((rho / r0).powf(g - 1.0) - 1.0) / ((g - 1.0) * r0) + 1.0 / rho - 1.0 / r0)
+    }
+
+    /// The density floor raises a density below f rho_0 (and its half step) to it,
+    /// counts and flags the particle, and reports the internal energy it added.
+    #[test]
+    fn the_density_floor_raises_counts_and_reports() {
+        let mut ps = vec![at((0.5, 0.5), (0.0, 0.0)); 3];
+        ps[1].rho = 850.0;
+        ps[2].rho = 900.0; // at the floor: untouched
+        let (mut sim, mut stage) = world(&ps, false, "(density_floor: Some(0.9))");
+        sim.resources.insert(GuardPower { power: 0.0 });
+        stage.run(&mut sim).unwrap();
+        let dt = sim.clock.dt;
+        assert_eq!(densities(&sim), vec![1000.0, 900.0, 900.0]);
+        assert_eq!(guards(&sim), vec![0, Guarded::FLOORED, 0]);
+        assert_eq!(DensityFloored::counted(&sim.diagnostics), 1.0);
+        let de = MASS * (internal_energy(900.0) - internal_energy(850.0));
+        let power = sim.resources.get::<GuardPower>().unwrap().power;
+        // Raising a density below rho_0 lowers e (e is least at rho_0).
+        assert!(de < 0.0);
+        assert!(
+            (power - de / dt).abs() < 1e-9 * (de / dt).abs(),
+            "{power} against {}",
+            de / dt
+        );
+        // The half step was raised too: with no rate the next step keeps 900.
+        stage.run(&mut sim).unwrap();
+        assert_eq!(densities(&sim)[1], 900.0);
+        assert_eq!(DensityFloored::counted(&sim.diagnostics), 1.0);
+        // raise_to_floor on its own: the half-step alone below, and a NaN left for the
+        // check.
+        let (mut rho, mut rh) = (Density(950.0), HalfDensity(890.0));
+        assert!(raise_to_floor(900.0, &mut rho, &mut rh));
+        assert_eq!((rho.0, rh.0), (950.0, 900.0));
+        let (mut rho, mut rh) = (Density(f64::NAN), HalfDensity(950.0));
+        assert!(!raise_to_floor(900.0, &mut rho, &mut rh));
+        assert!(rho.0.is_nan());
+        let (mut rho, mut rh) = (Density(f64::NEG_INFINITY), HalfDensity(950.0));
+        assert!(!raise_to_floor(900.0, &mut rho, &mut rh));
+    }
+
+    /// The fixed-point energies: rounding to 2^-60 J/m, and 0 for a non-finite energy.
+    #[test]
+    fn energies_in_fixed_point() {
+        assert_eq!(fixed_point(1.0), 1i128 << 60);
+        assert_eq!(fixed_point(-0.5), -(1i128 << 59));
+        assert_eq!(fixed_point(1.4 / FIXED_POINT), 1);
+        assert_eq!(fixed_point(1.6 / FIXED_POINT), 2);
+        assert_eq!(fixed_point(f64::NAN), 0);
+        assert_eq!(fixed_point(f64::INFINITY), 0);
+    }
+
+    /// A checkpoint after 3 steps resumes bit-identically with a new integrator, the
+    /// half-step columns and guard flags cleared first (they come from the state).
+    #[test]
+    fn a_checkpoint_resumes_bit_identically() {
+        let mut ps = vec![at((0.5, 0.5), (0.1, -0.2)); 3];
+        for (k, p) in ps.iter_mut().enumerate() {
+            p.a = DVec2::new(0.1 * k as f64, -9.81);
+            p.r = 50.0 * k as f64;
+            p.rho = 860.0 + 10.0 * k as f64;
+        }
+        let params = "(density_floor: Some(0.88))";
+        let (mut whole, mut a) = world(&ps, false, params);
+        for _ in 0..5 {
+            a.run(&mut whole).unwrap();
+        }
+        let (mut sim, mut b) = world(&ps, false, params);
+        for _ in 0..3 {
+            b.run(&mut sim).unwrap();
+        }
+        let state = b.save_state(&sim).unwrap();
+        {
+            let fluid = archetype::<Fluid>(&sim.world).unwrap();
+            for h in column_mut::<HalfVelocity>(fluid).unwrap().iter_mut() {
+                h.0 = DVec2::ZERO;
+            }
+            for h in column_mut::<HalfDensity>(fluid).unwrap().iter_mut() {
+                h.0 = 0.0;
+            }
+            for g in column_mut::<Guarded>(fluid).unwrap().iter_mut() {
+                g.0 = 0;
+            }
+        }
+        let mut c = pipeline(&mut sim, &[("integrate", params)]).remove(0);
+        c.load_state(&mut sim, &state).unwrap();
+        for _ in 0..2 {
+            c.run(&mut sim).unwrap();
+        }
+        assert_eq!(sim.clock.time.to_bits(), whole.clock.time.to_bits());
+        assert_eq!(positions(&sim), positions(&whole));
+        assert_eq!(velocities(&sim), velocities(&whole));
+        assert_eq!(densities(&sim), densities(&whole));
+        assert_eq!(guards(&sim), guards(&whole));
+        assert_eq!(guards(&sim)[0], Guarded::FLOORED);
+        // The first step is part of the state: the collapse check measures from it.
+        let mut d = pipeline(&mut sim, &[("integrate", "(collapse_fraction: 0.5)")]).remove(0);
+        d.load_state(&mut sim, &state).unwrap();
+        // C sqrt(h / a) = 9e-6 s at 1e7 m/s^2, below half the first step (1.6e-4 s).
+        set_acceleration(&mut sim, 1, DVec2::new(0.0, -1e7));
+        assert!(failure(&mut sim, &mut d)
+            .0
+            .starts_with("time step collapsed"));
+    }
+
+    /// The integrator advances the clock, and says so (the contract check allows one
+    /// such stage per pipeline).
+    #[test]
+    fn the_integrator_declares_the_clock() {
+        assert!(crate::testing::stage("integrate", "()")
+            .access()
+            .writes_clock());
+    }
+
+    /// A world without fluid has nothing to integrate: the run ends.
+    #[test]
+    fn without_fluid_the_run_ends() {
+        let (mut sim, mut stage) = world(&[], true, "()");
+        sim.clock.end_time = 2.5;
+        stage.run(&mut sim).unwrap();
+        assert_eq!(sim.clock.time, 2.5);
+    }
+
+    /// The parameters' ranges, each end.
+    #[test]
+    fn parameters_out_of_range_are_refused() {
+        let refused = |params: &str, field: &str| {
+            let e = crate::testing::built("integrate", params).err();
+            let e = e.unwrap_or_else(|| panic!("{params} was accepted"));
+            assert!(e.contains(field), "{params}: {e}");
+        };
+        for bad in ["0.0", "-0.1", "1.01", "NaN"] {
+            refused(&format!("(courant: {bad})"), "courant");
+        }
+        crate::testing::stage("integrate", "(courant: 1.0)");
+        for bad in ["0.0", "-1e-3", "inf", "NaN"] {
+            refused(&format!("(max_dt: {bad})"), "max_dt");
+        }
+        for bad in ["0.0", "1.0", "NaN"] {
+            refused(&format!("(collapse_fraction: {bad})"), "collapse_fraction");
+        }
+        for bad in ["0.0", "inf", "NaN"] {
+            refused(&format!("(density_limit: {bad})"), "density_limit");
+        }
+        for bad in ["0.0", "1.01", "NaN"] {
+            refused(&format!("(density_floor: Some({bad}))"), "density_floor");
+        }
+        crate::testing::stage("integrate", "(density_floor: Some(1.0))");
     }
 }

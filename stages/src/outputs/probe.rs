@@ -624,3 +624,505 @@ fn face(
     }
     Ok(sum / offsets.len() as f64)
 }
+
+#[cfg(test)]
+pub(super) mod tests {
+    use super::*;
+    use crate::testing::out_dir;
+    use glam::DVec2;
+    use sph_core::world::{column, column_mut};
+
+    /// The fluid particles of [`scene`].
+    pub(in crate::outputs) const N_FLUID: usize = 98;
+
+    /// A 0.3 m x 0.2 m closed box at rest with a 12 x 8 block of fluid in its lower
+    /// left corner (spacing 0.01 m): hydrostatic pressures with a ripple from particle
+    /// to particle, and densities, velocities, accelerations and guard flags that vary;
+    /// two drops apart from it;
+    /// its ghosts (pressures their sources' plus 50 Pa, so that they count apart) and
+    /// the neighbour grid built, with neighbour counts, unsorted.
+    pub(in crate::outputs) fn scene() -> Sim {
+        let mut world = hecs::World::new();
+        crate::testing::closed_box(&mut world, 0.3, 0.2);
+        for (a, b, x) in crate::testing::lattice(12, 8) {
+            let k = ((7 * a + 3 * b) % 11) as f64;
+            world.spawn((
+                Fluid,
+                Position(x),
+                Velocity(DVec2::new(0.1 * k - 0.4, 0.03 * k - 0.1)),
+                Density(995.0 + k),
+                Pressure(9810.0 * (0.08 - x.y) + 30.0 * k - 150.0),
+                Mass(0.1 + 0.001 * k),
+                Acceleration(DVec2::new(0.5 * k - 2.0, 0.2 * k)),
+                Guarded(if k == 3.0 { Guarded::REFLECTED } else { 0 }),
+            ));
+        }
+        // Two drops: one ahead of the block's front, one above its left column.
+        for x in [DVec2::new(0.2, 0.05), DVec2::new(0.05, 0.15)] {
+            world.spawn((
+                Fluid,
+                Position(x),
+                Velocity(DVec2::new(0.3, -0.5)),
+                Density(1000.0),
+                Pressure(0.0),
+                Mass(0.1),
+                Acceleration(DVec2::new(0.0, -9.81)),
+                Guarded(0),
+            ));
+        }
+        let mut sim = crate::testing::sim(world);
+        let stages = [
+            ("ghost_walls", "()"),
+            ("neighbour_grid", "(sort_every: 0, skin: 0.0)"),
+        ];
+        for mut stage in crate::testing::pipeline(&mut sim, &stages) {
+            stage.run(&mut sim).unwrap();
+        }
+        let fluid = archetype::<Fluid>(&sim.world).unwrap();
+        let ghost = archetype::<Ghost>(&sim.world).unwrap();
+        let fp = column::<Pressure>(fluid).unwrap();
+        let sources = column::<Ghost>(ghost).unwrap();
+        let mut gp = column_mut::<Pressure>(ghost).unwrap();
+        for (p, g) in gp.iter_mut().zip(sources.iter()) {
+            p.0 = fp[g.source as usize].0 + 50.0;
+        }
+        drop((fp, gp, sources));
+        sim
+    }
+
+    /// Every particle, fluid then ghosts: position, pressure, density, mass.
+    pub(in crate::outputs) fn all(sim: &Sim) -> Vec<(DVec2, f64, f64, f64)> {
+        let all = crate::testing::everyone(sim);
+        all.into_iter()
+            .map(|(x, _, m, rho, p)| (x, p, rho, m))
+            .collect()
+    }
+
+    /// Method I's sum over every particle (fluid and ghosts), p at `at` =
+    /// sum_j p_j W_j V_j / sum_j W_j V_j with V_j = m_j / rho_j, 0 where dry; the test
+    /// sim's kernel (Wendland, h 0.013 m).
+    pub(in crate::outputs) fn shepard_sum(sim: &Sim, at: DVec2) -> f64 {
+        let (mut num, mut den) = (0.0, 0.0);
+        for (x, p, rho, m) in all(sim) {
+            let w = sph_core::kernel::w(
+                sph_core::kernel::KernelKind::Wendland,
+                0.013,
+                (at - x).length(),
+            );
+            num += p * w * m / rho;
+            den += w * m / rho;
+        }
+        if den > 0.0 {
+            num / den
+        } else {
+            0.0
+        }
+    }
+
+    /// Wall `k` of the box (0 the floor, then counter-clockwise) where it is now.
+    pub(in crate::outputs) fn wall(sim: &Sim, k: usize) -> WallPose {
+        sph_core::walls::Walls::of(&sim.world).now()[k]
+    }
+
+    /// [`scene`] with three sensors (a point on the floor; a 10 mm face on the left
+    /// wall; an 8 mm face on the floor with a 3 ms time filter) and a gauge, the box
+    /// accelerating, writing into a fresh folder.
+    fn probed(name: &str) -> Sim {
+        let mut sim = scene();
+        let walls = sph_core::walls::Walls::of(&sim.world).entities().to_vec();
+        for (name, wall, along, width, diameter, filter) in [
+            ("s1", walls[0], 0.0625, 0.03, 0.0, 0.0),
+            ("s2", walls[3], 0.17, 0.02, 0.01, 0.0),
+            ("s3", walls[0], 0.04, 0.02, 0.008, 0.003),
+        ] {
+            sim.world.spawn((PressureSensor {
+                name: name.into(),
+                wall,
+                along,
+                width,
+                diameter,
+                filter,
+            },));
+        }
+        sim.world.spawn((WaveGauge {
+            name: "g1".into(),
+            x: 0.05,
+        },));
+        // At its rest place this instant, but accelerating: the carries take g - a_w.
+        for wall in sim.world.query_mut::<&mut WallPose>() {
+            wall.body.state.acceleration = DVec2::new(1.5, 2.0);
+        }
+        sim.out_dir = out_dir(name);
+        sim.clock.end_time = 1.0;
+        sim
+    }
+
+    /// Adds `dp` to every particle's pressure (fluid and ghosts): each method's
+    /// reading moves by `dp` (each is a weighted mean of carried pressures).
+    fn raise_pressures(sim: &Sim, dp: f64) {
+        for a in [
+            archetype::<Fluid>(&sim.world),
+            archetype::<Ghost>(&sim.world),
+        ]
+        .into_iter()
+        .flatten()
+        {
+            for p in column_mut::<Pressure>(a).unwrap().iter_mut() {
+                p.0 += dp;
+            }
+        }
+    }
+
+    /// Sensor `s`'s reading by `method` at `offset` from its centre, and over its face
+    /// (the mean over `face_offsets`), the methods called directly.
+    fn direct(sim: &Sim, s: &PressureSensor, method: &str, face: bool) -> f64 {
+        let offsets = if face {
+            face_offsets(s.diameter, 0.01)
+        } else {
+            vec![0.0]
+        };
+        let wall = *sim.world.get::<&WallPose>(s.wall).unwrap();
+        let particles = Particles::of(&sim.world).unwrap();
+        let mut m: Box<dyn ExtractionMethod> = match method {
+            "shepard" => Box::new(Shepard),
+            "nearest" => Box::new(Nearest),
+            _ => Box::new(Averaged::default()),
+        };
+        let mut sum = 0.0;
+        for o in &offsets {
+            let site = Site {
+                wall: &wall,
+                along: s.along + o,
+                width: s.width,
+                carry: Carry {
+                    rho0: 1000.0,
+                    g: DVec2::new(0.0, -9.81) - wall.body.acceleration_at(wall.point(s.along + o)),
+                },
+            };
+            sum += m.pressure(sim, particles, &site).unwrap();
+        }
+        sum / offsets.len() as f64
+    }
+
+    /// probes.csv: the header, and a row per sample (every 10 ms of simulated time,
+    /// the steps between skipped), each column what its method, face, filter, gauge or
+    /// diagnostic reads then. The pressures rise 100 Pa a step, so the readings and
+    /// the time filter's window show which step each comes from; the guards' counts are
+    /// their increase since the previous sample.
+    #[test]
+    fn probes_csv_holds_each_column_at_each_sample() {
+        let mut sim = probed("csv");
+        let params = "{\"interval\": 0.01, \"front\": true, \"density_fluctuation\": true, \"plots\": false}";
+        let mut probe = crate::testing::pipeline(&mut sim, &[("probe", params)]).remove(0);
+        let sensors = sph_core::world::cloned::<PressureSensor>(&sim.world);
+        let methods = ["shepard", "nearest", "averaged"];
+        let base: Vec<Vec<(f64, f64)>> = sensors
+            .iter()
+            .map(|s| {
+                let face = |m| direct(&sim, s, m, true);
+                methods
+                    .iter()
+                    .map(|m| (direct(&sim, s, m, false), face(m)))
+                    .collect()
+            })
+            .collect();
+        let gauge =
+            gauges::elevation(&sim, Particles::of(&sim.world).unwrap(), 0.05, None).unwrap();
+        let times = [0.0, 0.004, 0.008, 0.01, 0.013, 0.019, 0.02, 0.021];
+        let mut filters = vec![BoxFilter::new(0.003); 3];
+        let mut expected = Vec::new();
+        for (n, &t) in times.iter().enumerate() {
+            if n > 0 {
+                raise_pressures(&sim, 100.0);
+            }
+            if t == 0.01 {
+                WallReflections::add(&mut sim.diagnostics, 3);
+                DensityFloored::add(&mut sim.diagnostics, 2);
+            }
+            let lift = 100.0 * n as f64;
+            for (k, f) in filters.iter_mut().enumerate() {
+                f.push(t, base[2][k].1 + lift);
+            }
+            sim.clock.time = t;
+            probe.run(&mut sim).unwrap();
+            if [0.0, 0.01, 0.02].contains(&t) {
+                let mut row = vec![t];
+                for (s, readings) in sensors.iter().zip(&base) {
+                    for (k, (point, face)) in readings.iter().enumerate() {
+                        row.push(point + lift);
+                        if s.filter > 0.0 {
+                            row.push(filters[k].mean());
+                        } else if s.diameter > 0.0 {
+                            row.push(face + lift);
+                        }
+                    }
+                }
+                row.push(gauge);
+                row.push(0.12); // the front
+                let guards = if t == 0.01 { [2.0, 3.0] } else { [0.0, 0.0] };
+                expected.push((row, guards));
+            }
+        }
+        probe.finish(&mut sim).unwrap();
+        let text = std::fs::read_to_string(sim.out_dir.join("probes.csv")).unwrap();
+        let mut lines = text.lines();
+        assert_eq!(
+            lines.next().unwrap(),
+            "time,s1.shepard,s1.nearest,s1.averaged,\
+             s2.shepard,s2.shepard.transducer,s2.nearest,s2.nearest.transducer,\
+             s2.averaged,s2.averaged.transducer,\
+             s3.shepard,s3.shepard.transducer,s3.nearest,s3.nearest.transducer,\
+             s3.averaged,s3.averaged.transducer,g1,front,\
+             max_density_fluctuation,guarded_density_fluctuation,guarded_particles,\
+             floored,reflected"
+        );
+        let rows: Vec<Vec<f64>> = lines
+            .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+            .collect();
+        assert_eq!(rows.len(), 3);
+        for (row, (want, guards)) in rows.iter().zip(&expected) {
+            assert_eq!(row.len(), want.len() + 5);
+            for (k, (got, want)) in row.iter().zip(want).enumerate() {
+                assert!(
+                    (got - want).abs() <= 1e-9 * want.abs().max(1.0),
+                    "t {}, column {k}: {got} against {want}",
+                    row[0]
+                );
+            }
+            assert_eq!(row[row.len() - 2..], guards[..], "t {}", row[0]);
+        }
+        // At 20 ms the filter's 3 ms window holds the steps at 19 and 20 ms (+500 and
+        // +600 Pa, weighted 6 and 1 ms, the times since the steps before them): it
+        // lags the face's reading then.
+        let filtered = expected[2].0[11];
+        let lagged = base[2][0].1 + (0.006 * 500.0 + 0.001 * 600.0) / 0.007;
+        assert!(
+            (lagged - filtered).abs() < 1e-9,
+            "{filtered} against {lagged}"
+        );
+        std::fs::remove_dir_all(&sim.out_dir).unwrap();
+    }
+
+    /// A probe's checkpoint: the next sample time, the filters' readings and the
+    /// guard counts at the last sample, so a resumed probe writes what the whole run
+    /// would; a checkpoint with another number of filters is refused.
+    #[test]
+    fn a_probe_resumes_its_samples_filters_and_guard_counts() {
+        let params = "{\"interval\": 0.01, \"density_fluctuation\": true, \"plots\": false}";
+        let rows = |resume: bool| -> Vec<String> {
+            let mut sim = probed(if resume { "resumed" } else { "whole" });
+            let mut probe = crate::testing::pipeline(&mut sim, &[("probe", params)]).remove(0);
+            for (n, t) in [0.0, 0.004, 0.008, 0.012, 0.016].into_iter().enumerate() {
+                if n > 0 {
+                    raise_pressures(&sim, 100.0);
+                }
+                WallReflections::add(&mut sim.diagnostics, n as u64);
+                if n == 2 && resume {
+                    let state = probe.save_state(&sim).unwrap();
+                    probe = crate::testing::pipeline(&mut sim, &[("probe", params)]).remove(0);
+                    probe.load_state(&mut sim, &state).unwrap();
+                }
+                sim.clock.time = t;
+                probe.run(&mut sim).unwrap();
+            }
+            probe.finish(&mut sim).unwrap();
+            let text = std::fs::read_to_string(sim.out_dir.join("probes.csv")).unwrap();
+            std::fs::remove_dir_all(&sim.out_dir).unwrap();
+            text.lines().skip(1).map(String::from).collect()
+        };
+        let whole = rows(false);
+        assert_eq!(whole.len(), 2);
+        // A new probe opens probes.csv afresh: only the rows after the checkpoint.
+        assert_eq!(rows(true)[..], whole[1..]);
+        let mut sim = probed("mismatch");
+        let mut probe = crate::testing::pipeline(&mut sim, &[("probe", params)]).remove(0);
+        let state = probe.save_state(&sim).unwrap();
+        sim.world.spawn((PressureSensor {
+            name: "s4".into(),
+            wall: sph_core::walls::Walls::of(&sim.world).entities()[0],
+            along: 0.1,
+            width: 0.01,
+            diameter: 0.0,
+            filter: 0.002,
+        },));
+        let mut other = crate::testing::pipeline(&mut sim, &[("probe", params)]).remove(0);
+        let e = other.load_state(&mut sim, &state).unwrap_err().to_string();
+        assert!(e.contains("holds 3 sensor filters, the scenario 6"), "{e}");
+        std::fs::remove_dir_all(&sim.out_dir).unwrap();
+    }
+
+    /// What a probe reads follows its options: the grid for the piston force, the
+    /// neighbour counts for their statistics, the accelerations for the roll moment.
+    #[test]
+    fn the_probe_declares_what_its_options_read() {
+        use sph_core::contract::Quantity;
+        let reads = |params: &str| crate::testing::stage("probe", params).access().reads;
+        let base = reads("{}");
+        for q in [
+            Quantity::of::<Position>(),
+            Quantity::of::<Pressure>(),
+            Quantity::of::<WallPose>(),
+        ] {
+            assert!(base.contains(&q), "{q:?}");
+        }
+        for (params, q) in [
+            ("{\"piston\": true}", Quantity::of::<Neighbours>()),
+            ("{\"neighbours\": true}", Quantity::of::<NeighbourCount>()),
+            ("{\"roll_moment\": true}", Quantity::of::<Acceleration>()),
+        ] {
+            assert!(!base.contains(&q) && reads(params).contains(&q), "{params}");
+        }
+    }
+
+    /// At the end of the run each series is drawn once: a plot per sensor (its
+    /// methods), one of the gauges, and one per diagnostic group turned on; none with
+    /// `plots: false`. (What is drawn is checked by sph-output's plot tests.)
+    #[test]
+    fn the_end_of_the_run_plots_each_series() {
+        let pngs = |plots: bool| -> Vec<String> {
+            let mut sim = probed(&format!("plots_{plots}"));
+            sim.world.spawn((Tank {
+                width: 0.3,
+                height: 0.2,
+                pivot: DVec2::ZERO,
+            },));
+            let paddle = sph_core::walls::Walls::of(&sim.world).entities()[3];
+            sim.world.insert_one(paddle, Piston).unwrap();
+            let params = format!(
+                "{{\"front\": true, \"column_height\": true, \"density_fluctuation\": true, \
+                 \"max_speed\": true, \"neighbours\": true, \"roll_moment\": true, \
+                 \"piston\": true, \"interval\": 0.0, \"plots\": {plots}}}"
+            );
+            let mut probe = crate::testing::pipeline(&mut sim, &[("probe", &params)]).remove(0);
+            for t in [0.0, 0.01] {
+                sim.clock.time = t;
+                probe.run(&mut sim).unwrap();
+            }
+            probe.finish(&mut sim).unwrap();
+            let mut names: Vec<String> = std::fs::read_dir(&sim.out_dir)
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .filter(|n| n.ends_with(".png"))
+                .collect();
+            names.sort();
+            std::fs::remove_dir_all(&sim.out_dir).unwrap();
+            names
+        };
+        let mut expected = [
+            "probe_s1",
+            "probe_s2",
+            "probe_s3",
+            "probe_gauges",
+            "probe_front",
+            "probe_density",
+            "probe_guards",
+            "probe_speed",
+            "probe_roll_angle",
+            "probe_roll_moment",
+            "probe_piston_x",
+            "probe_piston_force",
+            "probe_neighbours",
+        ]
+        .map(|n| format!("{n}.png"));
+        expected.sort();
+        assert_eq!(pngs(true), expected);
+        assert!(pngs(false).is_empty());
+    }
+
+    /// Takes component `T` off every fluid particle.
+    fn strip<T: hecs::Component>(sim: &mut Sim) {
+        let fluid: Vec<hecs::Entity> = sim
+            .world
+            .query::<hecs::Entity>()
+            .with::<&Fluid>()
+            .iter()
+            .collect();
+        for e in fluid {
+            sim.world.remove_one::<T>(e).unwrap();
+        }
+    }
+
+    /// What each option needs is checked at setup, with what to do in the message.
+    /// (The probe's parameters are read as a map, as the scenario loader hands them
+    /// over: `{"field": value}` in these tests.)
+    #[test]
+    fn setup_names_what_a_probe_lacks() {
+        let refused = |sim: &mut Sim, params: &str, says: &str| {
+            let mut probe = crate::testing::stage("probe", params);
+            let e = probe.setup(sim).err().map(|e| e.message);
+            let e = e.unwrap_or_else(|| panic!("{params}: accepted"));
+            assert!(e.contains(says), "{params}: {e}");
+        };
+        let mut sim = probed("setup");
+        let grid = sim.resources.take::<Neighbours>().unwrap();
+        refused(&mut sim, "{}", "method `Shepard` needs the neighbour grid");
+        refused(
+            &mut sim,
+            "{\"methods\": [Nearest]}",
+            "wave gauges need the neighbour grid",
+        );
+        sim.resources.insert(grid);
+        refused(
+            &mut sim,
+            "{\"roll_moment\": true}",
+            "roll_moment needs a `tank`",
+        );
+        refused(
+            &mut sim,
+            "{\"piston\": true}",
+            "piston: true needs a `piston`",
+        );
+        let mut bare = crate::testing::sim(hecs::World::new());
+        bare.out_dir = out_dir("setup_bare");
+        refused(&mut bare, "{}", "nothing to probe");
+        crate::testing::stage("probe", "{\"front\": true}")
+            .setup(&mut bare)
+            .unwrap();
+        // Roll moment: a tank, but no accelerations.
+        let mut sim = probed("setup_tank");
+        sim.world.spawn((Tank {
+            width: 0.3,
+            height: 0.2,
+            pivot: DVec2::ZERO,
+        },));
+        strip::<Acceleration>(&mut sim);
+        refused(
+            &mut sim,
+            "{\"roll_moment\": true}",
+            "put Forces() before Probe()",
+        );
+        // A piston, but no grid (and no sensors or gauges, which would ask first).
+        let mut sim = scene();
+        sim.out_dir = out_dir("setup_piston");
+        let paddle = sph_core::walls::Walls::of(&sim.world).entities()[3];
+        sim.world.insert_one(paddle, Piston).unwrap();
+        sim.resources.take::<Neighbours>();
+        refused(
+            &mut sim,
+            "{\"methods\": [Nearest], \"piston\": true}",
+            "the piston force needs the neighbour grid",
+        );
+        // Neighbour statistics without counts.
+        let mut sim = probed("setup_counts");
+        strip::<NeighbourCount>(&mut sim);
+        refused(
+            &mut sim,
+            "{\"neighbours\": true}",
+            "NeighbourGrid(count: true)",
+        );
+        for dir in [
+            "setup",
+            "setup_bare",
+            "setup_tank",
+            "setup_piston",
+            "setup_counts",
+        ] {
+            std::fs::remove_dir_all(out_dir(dir)).unwrap();
+        }
+        // The interval.
+        for bad in ["-0.001", "inf", "NaN"] {
+            let e = crate::testing::built("probe", &format!("{{\"interval\": {bad}}}")).err();
+            assert!(e.is_some_and(|e| e.contains("interval")), "{bad}");
+        }
+    }
+}

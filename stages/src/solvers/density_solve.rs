@@ -319,11 +319,8 @@ impl DensitySolve {
                 i,
             ));
         }
-        let remaining = sim.clock.end_time - sim.clock.time;
-        if remaining < 1.5 * dt {
-            dt = dt.min(remaining);
-        }
-        Ok(dt)
+        // Land exactly on the end time.
+        Ok(dt.min(sim.clock.end_time - sim.clock.time))
     }
 }
 
@@ -333,5 +330,329 @@ fn unstable(what: &str, sim: &Sim, i: usize) -> StepError {
         what: what.to_string(),
         particle: Some(i as u32),
         position: x,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pressure_solve::limits;
+    use sph_core::kernel::Kernel;
+
+    fn solve_with(p: Params) -> DensitySolve {
+        DensitySolve {
+            limits: limits(
+                p.tolerance,
+                p.min_iterations,
+                p.max_iterations,
+                p.relaxation,
+                p.warm_start,
+            )
+            .unwrap(),
+            params: p,
+            first_dt: None,
+            jacobi: Jacobi::default(),
+            report: Report::default(),
+        }
+    }
+
+    /// A fluid particle at rest at the origin and one at `v`.
+    fn velocities(v: DVec2) -> [Velocity; 2] {
+        [Velocity(DVec2::ZERO), Velocity(v)]
+    }
+
+    /// dt = C ds / max|v|, at most `max_dt`; the first step at most 0.25 sqrt(h / a_0),
+    /// each later one at most `growth` times the step before; the last shortened to
+    /// land on the end time. The test sim: ds 0.01 m, h 0.013 m.
+    #[test]
+    fn the_step_is_the_cfl_step_ramped_capped_and_landing() {
+        let mut sim = crate::testing::sim(hecs::World::new());
+        sim.clock.end_time = 10.0;
+        let step = |sim: &Sim, v: f64, start: f64| {
+            let mut solve = solve_with(Params::default());
+            let vs = velocities(DVec2::new(0.6 * v, -0.8 * v));
+            solve.step_size(sim, v, start, &vs).unwrap()
+        };
+        let rel = |a: f64, b: f64| ((a - b) / b).abs() < 1e-14;
+        // CFL: 0.4 x 0.01 / 2 = 2 ms.
+        assert!(rel(step(&sim, 2.0, 0.0), 0.4 * 0.01 / 2.0));
+        // At rest: the largest step.
+        assert_eq!(step(&sim, 0.0, 0.0), 5e-3);
+        // The first step from a start accelerating at 100 m/s^2: 0.25 sqrt(h / a_0).
+        assert!(rel(
+            step(&sim, 0.0, 100.0),
+            0.25 * (0.013f64 / 100.0).sqrt()
+        ));
+        assert!(rel(step(&sim, 2.0, 100.0), 0.002));
+        // After a step of 1 ms: at most 1.2 ms, the start no longer counts.
+        sim.clock.dt = 1e-3;
+        assert!(rel(step(&sim, 0.0, 1e6), 1.2e-3));
+        assert!(rel(step(&sim, 2.0, 0.0), 1.2e-3));
+        assert!(rel(step(&sim, 4.0, 0.0), 1e-3));
+        // 0.7 of a step left: taken whole; 1.2 steps: a full step first.
+        sim.clock.time = 10.0 - 0.7e-3;
+        assert_eq!(step(&sim, 4.0, 0.0), sim.clock.end_time - sim.clock.time);
+        sim.clock.time = 10.0 - 1.2e-3;
+        assert!(rel(step(&sim, 4.0, 0.0), 1e-3));
+        sim.clock.time = 10.0 - 2e-3;
+        assert!(rel(step(&sim, 4.0, 0.0), 1e-3));
+    }
+
+    /// A step below `collapse_fraction` of the first stops the run naming the fastest
+    /// particle; so does a non-finite velocity, naming its particle.
+    #[test]
+    fn a_collapsed_step_or_a_non_finite_velocity_stops_the_run() {
+        let mut world = hecs::World::new();
+        for x in [0.1, 0.2] {
+            world.spawn((Fluid, Position(DVec2::new(x, 0.5))));
+        }
+        let mut sim = crate::testing::sim(world);
+        sim.clock.end_time = 10.0;
+        let mut solve = solve_with(Params {
+            collapse_fraction: 0.01,
+            ..Params::default()
+        });
+        let vs = velocities(DVec2::new(0.0, 1.0));
+        assert!((solve.step_size(&sim, 1.0, 0.0, &vs).unwrap() - 4e-3).abs() < 1e-15);
+        // 0.4 x 0.01 / 100 = 4e-5 s: 1 % of the first step, allowed.
+        let fast = velocities(DVec2::new(0.0, 100.0));
+        solve.step_size(&sim, 100.0, 0.0, &fast).unwrap();
+        let faster = velocities(DVec2::new(0.0, 101.0));
+        match solve.step_size(&sim, 101.0, 0.0, &faster) {
+            Err(StepError::Unstable {
+                what,
+                particle,
+                position,
+            }) => {
+                assert!(what.starts_with("time step collapsed"), "{what}");
+                assert!(what.contains("first step 4.000e-3 s"), "{what}");
+                assert_eq!(particle, Some(1));
+                assert_eq!(position, Some(DVec2::new(0.2, 0.5)));
+            }
+            other => panic!("{other:?}"),
+        }
+        let bad = [Velocity(DVec2::new(f64::NAN, 0.0)), Velocity(DVec2::ZERO)];
+        match solve.step_size(&sim, 0.0, 0.0, &bad) {
+            Err(StepError::Unstable { what, particle, .. }) => {
+                assert_eq!((what.as_str(), particle), ("non-finite velocity", Some(0)));
+            }
+            other => panic!("{other:?}"),
+        }
+        // The first step is the state a resumed run keeps.
+        let saved = solve.save_state(&sim).unwrap();
+        let mut resumed = solve_with(Params {
+            collapse_fraction: 0.01,
+            ..Params::default()
+        });
+        resumed.load_state(&mut sim, &saved).unwrap();
+        assert!(resumed.step_size(&sim, 101.0, 0.0, &faster).is_err());
+    }
+
+    /// The density solve publishes the step and leaves the pressures.
+    #[test]
+    fn the_solve_declares_the_step_and_the_pressures() {
+        use sph_core::contract::Quantity;
+        let writes = crate::testing::stage("density_solve", "()").access().writes;
+        assert!(writes.contains(&Quantity::of::<StepSize>()));
+        assert!(writes.contains(&Quantity::of::<Pressure>()));
+    }
+
+    /// The parameters' ranges, each end.
+    #[test]
+    fn parameters_out_of_range_are_refused() {
+        let refused = |params: &str, field: &str| {
+            let e = crate::testing::built("density_solve", params).err();
+            let e = e.unwrap_or_else(|| panic!("{params} was accepted"));
+            assert!(e.contains(field), "{params}: {e}");
+        };
+        for bad in ["0.0", "2.01", "NaN"] {
+            refused(&format!("(courant: {bad})"), "courant");
+        }
+        crate::testing::stage("density_solve", "(courant: 2.0)");
+        for bad in ["0.0", "inf", "NaN"] {
+            refused(&format!("(max_dt: {bad})"), "max_dt");
+        }
+        for bad in ["0.99", "NaN"] {
+            refused(&format!("(growth: {bad})"), "growth");
+        }
+        crate::testing::stage("density_solve", "(growth: 1.0)");
+        for bad in ["0.0", "1.0", "NaN"] {
+            refused(&format!("(collapse_fraction: {bad})"), "collapse_fraction");
+        }
+        refused("(relaxation: 0.0)", "relaxation");
+    }
+
+    /// The largest |a_np + a_p| of the fluid before the first step, by brute force
+    /// over every particle within the support: a_np the `Acceleration` column,
+    /// a_p,i = - sum_j m_j (p_i/rho_i^2 + p_j/rho_j^2) grad W_ij with the pressures the
+    /// column holds, a ghost's its source's plus its carry (at least 0).
+    fn start_by_hand(sim: &Sim) -> f64 {
+        let carries = &sim.resources.get::<DfsphFactors>().unwrap().ghost_offset;
+        let sources: Vec<usize> = archetype::<Ghost>(&sim.world)
+            .map(|g| {
+                column::<Ghost>(g)
+                    .unwrap()
+                    .iter()
+                    .map(|g| g.source as usize)
+                    .collect()
+            })
+            .unwrap_or_default();
+        let mut all = crate::testing::everyone(sim);
+        let n = all.len() - sources.len();
+        for (k, &s) in sources.iter().enumerate() {
+            all[n + k].4 = (all[s].4 + carries[k]).max(0.0);
+        }
+        let f = archetype::<Fluid>(&sim.world).unwrap();
+        let a_np = column::<Acceleration>(f).unwrap();
+        let kernel = sph_core::kernel::Wendland::new(0.013);
+        (0..n)
+            .map(|i| {
+                let (xi, _, _, rhoi, pi) = all[i];
+                let mut a = a_np[i].0;
+                for (j, &(xj, _, mj, rhoj, pj)) in all.iter().enumerate() {
+                    let d = xi - xj;
+                    if j != i && d.length() < 0.026 {
+                        a -= mj
+                            * (pi / (rhoi * rhoi) + pj / (rhoj * rhoj))
+                            * kernel.grad(d, d.length());
+                    }
+                }
+                a.length()
+            })
+            .fold(0.0, f64::max)
+    }
+
+    /// One DFSPH step's density solve on a block of water falling in a box corner:
+    /// the step published is the first step's rule; each fluid particle's new velocity
+    /// is its old one plus dt times the completed acceleration (gravity and the
+    /// pressure's); the ghosts' velocities (and no-slip velocities) move by the mirror
+    /// of their sources' change; the densities are the predicted ones; the row of density_solve.csv and the
+    /// counters record the solve.
+    #[test]
+    fn a_step_completes_the_acceleration_and_reports() {
+        let mut world = hecs::World::new();
+        crate::testing::closed_box(&mut world, 0.2, 0.2);
+        for (_, b, x) in crate::testing::lattice(6, 5) {
+            world.spawn((
+                Fluid,
+                Position(x),
+                Velocity(DVec2::new(0.05 * b as f64, -0.1)),
+                Density(1000.0),
+                Pressure(0.0),
+                Mass(0.1),
+                // Gravity and a sideways push of 50 m/s^2 (a tank accelerating).
+                Acceleration(DVec2::new(50.0, -9.81)),
+            ));
+        }
+        let mut sim = crate::testing::sim(world);
+        sim.clock.end_time = 1.0;
+        sim.out_dir = crate::testing::out_dir("density_solve");
+        let mut stages = crate::testing::pipeline(
+            &mut sim,
+            &[
+                ("ghost_walls", "(slip: NoSlip)"),
+                ("neighbour_grid", "()"),
+                ("dfsph_factor", "()"),
+                ("density_solve", "(max_iterations: 50)"),
+            ],
+        );
+        for stage in &mut stages[..3] {
+            stage.run(&mut sim).unwrap();
+        }
+        let fluid_v = |sim: &Sim| -> Vec<DVec2> {
+            let f = archetype::<Fluid>(&sim.world).unwrap();
+            column::<Velocity>(f).unwrap().iter().map(|v| v.0).collect()
+        };
+        let ghost_v = |sim: &Sim| -> Vec<DVec2> {
+            let g = archetype::<Ghost>(&sim.world).unwrap();
+            column::<Velocity>(g).unwrap().iter().map(|v| v.0).collect()
+        };
+        let no_slip = |sim: &Sim| -> Vec<DVec2> {
+            let columns = sim.resources.get::<sph_core::pair::Columns>().unwrap();
+            columns.get::<NoSlipVelocity>().unwrap().to_vec()
+        };
+        let (v0, g0, ns0) = (fluid_v(&sim), ghost_v(&sim), no_slip(&sim));
+        let rho0: Vec<f64> = crate::testing::everyone(&sim).iter().map(|p| p.3).collect();
+        let a0 = start_by_hand(&sim);
+        stages[3].run(&mut sim).unwrap();
+        let dt = sim.resources.get::<StepSize>().unwrap().0;
+        // The first step's rule, 0.25 sqrt(h / a_0) with a_0 about 50 m/s^2 (the push
+        // and the pressures' gradient): about 4 ms, below max_dt (5 ms) and the CFL
+        // step (0.4 ds / 0.22 m/s = 18 ms).
+        let first = 0.25 * (0.013 / a0).sqrt();
+        assert!(
+            (dt - first).abs() < 1e-9 * first,
+            "{dt} against {first}, a_0 {a0}"
+        );
+        assert!(dt < 4.5e-3 && dt > 2e-3, "{dt}");
+        let (v1, g1) = (fluid_v(&sim), ghost_v(&sim));
+        let f = archetype::<Fluid>(&sim.world).unwrap();
+        let a: Vec<DVec2> = column::<Acceleration>(f)
+            .unwrap()
+            .iter()
+            .map(|a| a.0)
+            .collect();
+        let mut pressed = 0;
+        for i in 0..v0.len() {
+            let e = v0[i] + dt * a[i];
+            assert!(
+                (v1[i] - e).length() < 1e-12,
+                "particle {i}: {} against {e}",
+                v1[i]
+            );
+            pressed += ((a[i] - DVec2::new(50.0, -9.81)).length() > 1e-6) as usize;
+        }
+        assert!(pressed > 10, "{pressed}");
+        // With the continuity floor (DfsphFactor's default) the density column is left
+        // at the predicted rho + dt D rho/Dt, the rate summed here by brute force
+        // over every particle within the support at the final velocities.
+        let kernel = sph_core::kernel::Wendland::new(0.013);
+        let all = crate::testing::everyone(&sim);
+        for i in 0..v0.len() {
+            let mut rate = 0.0;
+            for (j, p) in all.iter().enumerate() {
+                let d = all[i].0 - p.0;
+                if j != i && d.length() < 0.026 {
+                    rate += p.2 * (all[i].1 - p.1).dot(kernel.grad(d, d.length()));
+                }
+            }
+            let e = rho0[i] + dt * rate;
+            assert!(
+                (all[i].3 - e).abs() < 1e-9,
+                "rho {i}: {} against {e}",
+                all[i].3
+            );
+        }
+        {
+            let mirror = sim.resources.get::<GhostReflections>().unwrap();
+            let g = archetype::<Ghost>(&sim.world).unwrap();
+            let sources = column::<Ghost>(g).unwrap();
+            for k in 0..g0.len() {
+                let s = sources[k].source as usize;
+                let e = g0[k] + mirror.apply(k, v1[s] - v0[s]);
+                assert!(
+                    (g1[k] - e).length() < 1e-12,
+                    "ghost {k}: {} against {e}",
+                    g1[k]
+                );
+                // The no-slip velocity 2 v_w - v (or +v across a corner) follows
+                // its source's change with its sign.
+                let sign = sim.resources.get::<crate::vocab::NoSlipSigns>().unwrap().0[k];
+                let e = ns0[k] + sign * (v1[s] - v0[s]);
+                let ns = no_slip(&sim)[k];
+                assert!((ns - e).length() < 1e-12, "no-slip {k}: {ns} against {e}");
+            }
+        }
+        stages[3].finish(&mut sim).unwrap();
+        let text = std::fs::read_to_string(sim.out_dir.join("density_solve.csv")).unwrap();
+        let rows: Vec<&str> = text.lines().collect();
+        assert_eq!(rows[0], "time,iterations,error,dt");
+        let row: Vec<f64> = rows[1].split(',').map(|v| v.parse().unwrap()).collect();
+        assert_eq!(row[3], dt);
+        assert!(row[1] >= 1.0 && row[2] <= 1e-3, "{row:?}");
+        assert_eq!(sim.diagnostics["density_solve_steps"], 1.0);
+        assert_eq!(sim.diagnostics["density_solve_iterations"], row[1]);
+        assert_eq!(sim.diagnostics["density_solve_unconverged"], 0.0);
+        std::fs::remove_dir_all(&sim.out_dir).unwrap();
     }
 }

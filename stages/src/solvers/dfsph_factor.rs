@@ -302,3 +302,227 @@ impl DfsphFactor {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use sph_core::components::Velocity;
+    use sph_core::kernel::Wendland;
+
+    /// At setup every fluid particle takes the mass rho_0 ds^2 / S, S the lattice sum
+    /// sum_ij ds^2 W(ds |(i, j)|) (so a particle of a full lattice sums to rho_0), the
+    /// pressure of its starting density by Tait, and the density rho_0; without the
+    /// grid, or without pressures, setup refuses the scene.
+    #[test]
+    fn the_setup_sets_the_lattice_mass_and_the_starting_pressures() {
+        let mut world = hecs::World::new();
+        for (k, rho) in [1000.0, 1001.5, 998.0].into_iter().enumerate() {
+            world.spawn((
+                Fluid,
+                Position(DVec2::new(0.1 * k as f64, 0.1)),
+                Density(rho),
+                Pressure(0.0),
+                Mass(0.5),
+            ));
+        }
+        let mut sim = crate::testing::sim(world);
+        crate::testing::pipeline(
+            &mut sim,
+            &[("neighbour_grid", "()"), ("dfsph_factor", "()")],
+        );
+        // The test sim: Wendland, h 0.013 m (support 0.026), ds 0.01 m, rho_0 1000,
+        // c_0 20 m/s, gamma 7.
+        let kernel = Wendland::new(0.013);
+        let mut sum = 0.0;
+        for i in -3i32..=3 {
+            for j in -3i32..=3 {
+                sum += 1e-4 * kernel.w(0.01 * ((i * i + j * j) as f64).sqrt());
+            }
+        }
+        let m = 1000.0 * 1e-4 / sum;
+        let tait = |rho: f64| 1000.0 * 400.0 / 7.0 * ((rho / 1000.0f64).powi(7) - 1.0);
+        let fluid = archetype::<Fluid>(&sim.world).unwrap();
+        let (mass, density) = (
+            column::<Mass>(fluid).unwrap(),
+            column::<Density>(fluid).unwrap(),
+        );
+        let p = column::<Pressure>(fluid).unwrap();
+        for (k, rho) in [1000.0, 1001.5, 998.0].into_iter().enumerate() {
+            assert!(
+                (mass[k].0 - m).abs() < 1e-12 * m,
+                "{} against {m}",
+                mass[k].0
+            );
+            assert_eq!(density[k].0, 1000.0);
+            assert!(
+                (p[k].0 - tait(rho)).abs() < 1e-9 * 400.0,
+                "{} against {}",
+                p[k].0,
+                tait(rho)
+            );
+        }
+        let mut bare = crate::testing::sim(hecs::World::new());
+        let e = crate::testing::stage("dfsph_factor", "()")
+            .setup(&mut bare)
+            .unwrap_err();
+        assert!(e.message.contains("NeighbourGrid"), "{}", e.message);
+        let mut world = hecs::World::new();
+        world.spawn((Fluid, Position(DVec2::ZERO), Density(1000.0), Mass(0.1)));
+        let mut sim = crate::testing::sim(world);
+        crate::testing::pipeline(&mut sim, &[("neighbour_grid", "()")]);
+        let e = crate::testing::stage("dfsph_factor", "()")
+            .setup(&mut sim)
+            .unwrap_err();
+        assert!(e.message.contains("without pressure"), "{}", e.message);
+    }
+
+    /// The factor stage provides the factors and corrects the masses and densities.
+    #[test]
+    fn the_factor_stage_declares_the_factors() {
+        use sph_core::contract::Quantity;
+        let access = crate::testing::stage("dfsph_factor", "()").access();
+        assert!(access.writes.contains(&Quantity::of::<DfsphFactors>()));
+        assert!(access.updates.contains(&Quantity::of::<Mass>()));
+    }
+
+    /// A 6 x 4 block of water in the corner of a closed 0.2 m box whose walls ride on
+    /// bodies accelerating each its own way (as a piston's wall does beside a tank's),
+    /// after `GhostWalls(hydrostatic)`, `NeighbourGrid` and `DfsphFactor` (`factor`
+    /// its parameters) have set up, the fluid's densities then set to `rho(k)`.
+    fn cornered(
+        hydrostatic: bool,
+        factor: &str,
+        rho: impl Fn(usize) -> f64,
+    ) -> (Sim, Vec<Box<dyn Stage>>) {
+        use sph_core::motion::{Pose, RigidState};
+        let mut world = hecs::World::new();
+        let corners = [(0.0, 0.0), (0.2, 0.0), (0.2, 0.2), (0.0, 0.2)];
+        crate::testing::closed_polygon(&mut world, &corners, |k| Pose {
+            pivot: DVec2::new(0.1, 0.1),
+            state: RigidState {
+                alpha: 1.5 - k as f64,
+                omega: 0.3 * k as f64,
+                acceleration: DVec2::new(2.0 * k as f64 - 3.0, 1.0 + k as f64),
+                ..Default::default()
+            },
+        });
+        for (_, _, x) in crate::testing::lattice(6, 4) {
+            world.spawn((
+                Fluid,
+                Position(x),
+                Velocity(DVec2::ZERO),
+                Density(1000.0),
+                Pressure(0.0),
+                Mass(0.1),
+            ));
+        }
+        let mut sim = crate::testing::sim(world);
+        let ghosts = format!("(hydrostatic: {hydrostatic})");
+        let stages = crate::testing::pipeline(
+            &mut sim,
+            &[
+                ("ghost_walls", &ghosts),
+                ("neighbour_grid", "()"),
+                ("dfsph_factor", factor),
+            ],
+        );
+        let fluid = archetype::<Fluid>(&sim.world).unwrap();
+        for (k, r) in column_mut::<Density>(fluid).unwrap().iter_mut().enumerate() {
+            r.0 = rho(k);
+        }
+        (sim, stages)
+    }
+
+    fn run_all(sim: &mut Sim, stages: &mut [Box<dyn Stage>]) -> Result<(), StepError> {
+        stages.iter_mut().try_for_each(|s| s.run(sim))
+    }
+
+    /// Each ghost's pressure carry is rho_0 (g - a_w) . (x_ghost - x_source), a_w the
+    /// acceleration at the source of the body of the wall it was mirrored across
+    /// (0 without the hydrostatic correction); each ghost takes its source's density.
+    #[test]
+    fn the_ghost_carries_are_the_hydrostatic_difference_in_each_wall_s_frame() {
+        for hydrostatic in [true, false] {
+            let (mut sim, mut stages) = cornered(hydrostatic, "()", |_| 1000.0);
+            run_all(&mut sim, &mut stages).unwrap();
+            let all = crate::testing::everyone(&sim);
+            let ghost = archetype::<Ghost>(&sim.world).unwrap();
+            let (source, wall) = (
+                column::<Ghost>(ghost).unwrap(),
+                column::<MirrorWall>(ghost).unwrap(),
+            );
+            let n = all.len() - source.len();
+            let carries = &sim.resources.get::<DfsphFactors>().unwrap().ghost_offset;
+            assert_eq!(carries.len(), source.len());
+            let accelerations: Vec<DVec2> = (0..source.len())
+                .map(|k| {
+                    let pose = sim.world.get::<&WallPose>(wall[k].0).unwrap().body;
+                    pose.acceleration_at(all[source[k].source as usize].0)
+                })
+                .collect();
+            // The walls' bodies differ: the ghosts see more than one acceleration.
+            assert!(accelerations
+                .iter()
+                .any(|a| (*a - accelerations[0]).length() > 0.1));
+            for k in 0..source.len() {
+                let s = source[k].source as usize;
+                let g_eff = DVec2::new(0.0, -9.81) - accelerations[k];
+                let e = if hydrostatic {
+                    1000.0 * g_eff.dot(all[n + k].0 - all[s].0)
+                } else {
+                    0.0
+                };
+                assert!(
+                    (carries[k] - e).abs() < 1e-9,
+                    "ghost {k}: {} against {e}",
+                    carries[k]
+                );
+                assert_eq!(all[n + k].3, all[s].3, "ghost {k}'s density");
+            }
+        }
+    }
+
+    /// With the continuity floor each density is at least the one the column held
+    /// (the last density solve's prediction); without it, the summation alone.
+    #[test]
+    fn the_continuity_floor_keeps_the_predicted_density() {
+        let preset = |k: usize| match k {
+            0 => 1100.0,
+            1 => 500.0,
+            _ => 1000.0,
+        };
+        let densities = |factor: &str| {
+            let (mut sim, mut stages) = cornered(true, factor, preset);
+            run_all(&mut sim, &mut stages).unwrap();
+            let all = crate::testing::everyone(&sim);
+            // The 24 fluid particles (the ghosts follow them).
+            all.iter().take(24).map(|p| p.3).collect::<Vec<f64>>()
+        };
+        let summed = densities("(continuity_floor: false)");
+        let floored = densities("(continuity_floor: true)");
+        assert!(summed[0] < 1100.0 && summed[1] > 500.0);
+        for k in 0..summed.len() {
+            assert_eq!(floored[k], summed[k].max(preset(k)), "particle {k}");
+        }
+        assert_eq!(floored[0], 1100.0);
+    }
+
+    /// A stage that changed the particle count after the grid was built is caught
+    /// before the lists are read.
+    #[test]
+    fn a_changed_particle_count_is_refused() {
+        let (mut sim, mut stages) = cornered(true, "()", |_| 1000.0);
+        stages[0].run(&mut sim).unwrap();
+        stages[1].run(&mut sim).unwrap();
+        let last = sim
+            .world
+            .query::<hecs::Entity>()
+            .with::<&Ghost>()
+            .iter()
+            .last()
+            .unwrap();
+        sim.world.despawn(last).unwrap();
+        let e = stages[2].run(&mut sim).unwrap_err().to_string();
+        assert!(e.contains("changed the particle count"), "{e}");
+    }
+}

@@ -234,7 +234,13 @@ impl Jacobi {
             let rho: &[Density] = &rho_col;
             let rate = &self.rate;
             let residual = |i: usize| residual(target, dt, rho0, rho[i].0, rate[i]);
-            let error = sum_fixed(n, |i| residual(i).max(0.0)) / (n.max(1) as f64 * rho0);
+            // The compression max(r_i, 0), a NaN kept (`f64::max` would drop it and
+            // the solve would go on with the particle unpressed).
+            let compression = |i: usize| match residual(i) {
+                r if r <= 0.0 => 0.0,
+                r => r,
+            };
+            let error = sum_fixed(n, compression) / (n.max(1) as f64 * rho0);
             if !error.is_finite() {
                 let i = (0..n).find(|&i| !residual(i).is_finite()).unwrap_or(0);
                 let x = column::<sph_core::components::Position>(fluid)?[i].0;
@@ -652,6 +658,7 @@ impl Report {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testing::everyone;
     use sph_core::components::{Mass, Position};
     use sph_core::kernel::{KernelKind, Wendland};
 
@@ -684,6 +691,8 @@ mod tests {
             }
         }
         let mut sim = crate::testing::sim(world);
+        // The velocity mirrors, as the solves' setup asks GhostWalls for them.
+        sim.resources.insert(GhostReflections::default());
         // The summation density alone: no continuity floor.
         let mut stages = crate::testing::pipeline(
             &mut sim,
@@ -707,33 +716,6 @@ mod tests {
         )
         .unwrap();
         sim
-    }
-
-    /// Every particle of the world, fluid then ghosts: position, velocity, mass, density,
-    /// pressure.
-    fn everyone(sim: &Sim) -> Vec<(DVec2, DVec2, f64, f64, f64)> {
-        let mut all = Vec::new();
-        for a in [
-            archetype::<Fluid>(&sim.world),
-            archetype::<Ghost>(&sim.world),
-        ]
-        .into_iter()
-        .flatten()
-        {
-            let (x, v, m) = (
-                column::<Position>(a).unwrap(),
-                column::<Velocity>(a).unwrap(),
-                column::<Mass>(a).unwrap(),
-            );
-            let (rho, p) = (
-                column::<Density>(a).unwrap(),
-                column::<Pressure>(a).unwrap(),
-            );
-            for k in 0..x.len() {
-                all.push((x[k].0, v[k].0, m[k].0, rho[k].0, p[k].0));
-            }
-        }
-        all
     }
 
     /// The factor stage's densities, factors and pair gradients, and the solve's two
@@ -824,6 +806,300 @@ mod tests {
         sim.resources.insert(factors);
     }
 
+    /// The solve written out by brute force over every particle within the support
+    /// (not the lists or the stored gradients), from [`factored`]'s state: the warm
+    /// start p <- w p, then `iterations` times the projected relaxed Jacobi update
+    /// p_i <- max(p_i + omega alpha_i r_i / dt^2, 0) with the ghosts' pressures their
+    /// sources' plus their carries (at least 0), a_p,i = - sum_j m_j (p_i/rho_i^2 +
+    /// p_j/rho_j^2) grad W_ij, v = v0 + dt a_p (a ghost: its own v0 plus the mirror of
+    /// its source's change), and r_i = dt D rho_i/Dt (divergence) or rho_i - rho_0 +
+    /// dt D rho_i/Dt (density). Returns the fluid's pressures, every particle's
+    /// velocity and the mean error max(r_i, 0)/rho_0 at the end.
+    fn by_hand(
+        sim: &Sim,
+        dt: f64,
+        target: Target,
+        (omega, warm, iterations): (f64, f64, u32),
+    ) -> (Vec<f64>, Vec<DVec2>, f64) {
+        let all = everyone(sim);
+        let n = archetype::<Fluid>(&sim.world).unwrap().len() as usize;
+        let factors = sim.resources.get::<DfsphFactors>().unwrap();
+        let mirror = sim.resources.get::<GhostReflections>().unwrap();
+        let sources: Vec<usize> = archetype::<Ghost>(&sim.world)
+            .map(|g| {
+                column::<Ghost>(g)
+                    .unwrap()
+                    .iter()
+                    .map(|g| g.source as usize)
+                    .collect()
+            })
+            .unwrap_or_default();
+        let kernel = Wendland::new(sim.constants.h);
+        let support = kernel.support();
+        let x: Vec<DVec2> = all.iter().map(|a| a.0).collect();
+        let v0: Vec<DVec2> = all.iter().map(|a| a.1).collect();
+        let (m, rho): (Vec<f64>, Vec<f64>) = all.iter().map(|a| (a.2, a.3)).unzip();
+        let x = &x;
+        // Each fluid particle's neighbours j within the support, with m_j grad_i W_ij.
+        let pairs: Vec<Vec<(usize, DVec2)>> = (0..n)
+            .map(|i| {
+                (0..all.len())
+                    .filter(|&j| j != i && (x[i] - x[j]).length() < support)
+                    .map(|j| {
+                        let d = x[i] - x[j];
+                        (j, m[j] * kernel.grad(d, d.length()))
+                    })
+                    .collect()
+            })
+            .collect();
+        let mut p: Vec<f64> = all.iter().take(n).map(|a| warm * a.4).collect();
+        let with_ghosts = |p: &[f64]| -> Vec<f64> {
+            let ghosts = sources
+                .iter()
+                .zip(&factors.ghost_offset)
+                .map(|(&s, o)| (p[s] + o).max(0.0));
+            p.iter().copied().chain(ghosts).collect()
+        };
+        let velocities = |p: &[f64]| -> Vec<DVec2> {
+            let q = with_ghosts(p);
+            let acc: Vec<DVec2> = (0..n)
+                .map(|i| {
+                    pairs[i]
+                        .iter()
+                        .map(|&(j, g)| -(q[i] / (rho[i] * rho[i]) + q[j] / (rho[j] * rho[j])) * g)
+                        .sum()
+                })
+                .collect();
+            let mut v: Vec<DVec2> = (0..n).map(|i| v0[i] + dt * acc[i]).collect();
+            v.extend((0..sources.len()).map(|k| v0[n + k] + dt * mirror.apply(k, acc[sources[k]])));
+            v
+        };
+        let residuals = |v: &[DVec2]| -> Vec<f64> {
+            (0..n)
+                .map(|i| {
+                    let rate: f64 = pairs[i].iter().map(|&(j, g)| (v[i] - v[j]).dot(g)).sum();
+                    match target {
+                        Target::Divergence => dt * rate,
+                        Target::Density => rho[i] - 1000.0 + dt * rate,
+                    }
+                })
+                .collect()
+        };
+        let mut v = if warm > 0.0 {
+            velocities(&p)
+        } else {
+            v0.clone()
+        };
+        for _ in 0..iterations {
+            let r = residuals(&v);
+            for i in 0..n {
+                p[i] = (p[i] + omega * factors.alpha[i] * r[i] / (dt * dt)).max(0.0);
+            }
+            v = velocities(&p);
+        }
+        let error = residuals(&v).iter().map(|r| r.max(0.0)).sum::<f64>() / (n as f64 * 1000.0);
+        (p, v, error)
+    }
+
+    /// [`Jacobi::solve`] on [`factored`]'s state, with the given limits.
+    fn solved(sim: &mut Sim, dt: f64, target: Target, limits: Limits) -> Outcome {
+        let factors = sim.resources.take::<DfsphFactors>().unwrap();
+        let mut jacobi = Jacobi::default();
+        let outcome = jacobi
+            .solve(
+                sim,
+                dt,
+                target,
+                limits,
+                (&factors.alpha, &factors.ghost_offset, &factors.gradients),
+            )
+            .unwrap();
+        sim.resources.insert(factors);
+        outcome
+    }
+
+    /// Three iterations of the solve, for each target and with and without the warm
+    /// start, equal [`by_hand`]: the pressures, every velocity and the error. To
+    /// round-off (1e-9 relative: the same sums in another order, three times over).
+    #[test]
+    fn three_iterations_are_the_projected_jacobi_update() {
+        let dt = 2e-3;
+        for (target, warm) in [
+            (Target::Density, 0.5),
+            (Target::Density, 0.0),
+            (Target::Divergence, 0.7),
+        ] {
+            let mut sim = factored();
+            let (p, v, error) = by_hand(&sim, dt, target, (0.4, warm, 3));
+            let limits = Limits {
+                tolerance: 1e-14,
+                min_iterations: 0,
+                max_iterations: 3,
+                relaxation: 0.4,
+                warm_start: warm,
+            };
+            let outcome = solved(&mut sim, dt, target, limits);
+            assert_eq!((outcome.iterations, outcome.capped), (3, true));
+            assert!(
+                (outcome.error - error).abs() <= 1e-9 * error,
+                "{target:?}: error {} against {error}",
+                outcome.error
+            );
+            let all = everyone(&sim);
+            let n = p.len();
+            let pmax = p.iter().fold(0.0f64, |a, b| a.max(*b));
+            assert!(
+                pmax > 0.0 && p.contains(&0.0),
+                "some pressed, some not: {p:?}"
+            );
+            for i in 0..n {
+                assert!(
+                    (all[i].4 - p[i]).abs() <= 1e-9 * pmax,
+                    "{target:?} p {i}: {} against {}",
+                    all[i].4,
+                    p[i]
+                );
+            }
+            let vmax = v.iter().fold(0.0f64, |a, b| a.max(b.length()));
+            for (k, (got, want)) in all.iter().map(|a| a.1).zip(&v).enumerate() {
+                assert!(
+                    (got - *want).length() <= 1e-9 * vmax,
+                    "{target:?} v {k}: {got} against {want}"
+                );
+            }
+        }
+    }
+
+    /// The solve stops at the first iteration (after the least number) whose error is
+    /// within the tolerance, uncapped; the least number is made even when the start is
+    /// within it; and the cap stops it, flagged.
+    #[test]
+    fn the_solve_stops_at_the_tolerance_or_the_cap() {
+        let dt = 2e-3;
+        let limits = |tolerance, min_iterations, max_iterations| Limits {
+            tolerance,
+            min_iterations,
+            max_iterations,
+            relaxation: 0.4,
+            warm_start: 0.5,
+        };
+        let mut sim = factored();
+        let free = solved(&mut sim, dt, Target::Density, limits(1e-3, 1, 200));
+        assert!(!free.capped && free.error <= 1e-3, "{free:?}");
+        assert!(free.iterations >= 2, "{free:?}");
+        // The iteration before the last was above the tolerance.
+        let before = by_hand(
+            &factored(),
+            dt,
+            Target::Density,
+            (0.4, 0.5, free.iterations - 1),
+        )
+        .2;
+        assert!(before > 1e-3, "{before}");
+        // A loose tolerance the start already meets: the least number of iterations.
+        let start = by_hand(&factored(), dt, Target::Density, (0.4, 0.5, 0)).2;
+        let loose = solved(
+            &mut factored(),
+            dt,
+            Target::Density,
+            limits(start * 1.01, 2, 200),
+        );
+        assert_eq!((loose.iterations, loose.capped), (2, false));
+        let capped = solved(&mut factored(), dt, Target::Density, limits(1e-3, 1, 1));
+        assert_eq!((capped.iterations, capped.capped), (1, true));
+    }
+
+    /// A solve whose ghosts lack their velocity mirrors or pressure carries (a
+    /// pipeline without GhostWalls before it) is refused, not run.
+    #[test]
+    fn a_solve_without_the_ghosts_mirrors_or_carries_is_refused() {
+        let limits = Limits {
+            tolerance: 1e-3,
+            min_iterations: 1,
+            max_iterations: 10,
+            relaxation: 0.4,
+            warm_start: 0.5,
+        };
+        for (mirrors, carries) in [(false, true), (true, false)] {
+            let mut sim = factored();
+            let factors = sim.resources.take::<DfsphFactors>().unwrap();
+            if !mirrors {
+                sim.resources.insert(GhostReflections::default());
+            }
+            let offsets = if carries {
+                &factors.ghost_offset[..]
+            } else {
+                &[][..]
+            };
+            let e = Jacobi::default()
+                .solve(
+                    &mut sim,
+                    2e-3,
+                    Target::Density,
+                    limits,
+                    (&factors.alpha, offsets, &factors.gradients),
+                )
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("GhostWalls must run before"), "{e}");
+        }
+    }
+
+    /// A solve whose error turns non-finite stops, naming the first particle whose
+    /// density error is not finite.
+    #[test]
+    fn a_diverged_solve_names_the_particle() {
+        let mut sim = factored();
+        {
+            let fluid = archetype::<Fluid>(&sim.world).unwrap();
+            column_mut::<Density>(fluid).unwrap()[7].0 = f64::NAN;
+        }
+        let factors = sim.resources.take::<DfsphFactors>().unwrap();
+        let limits = Limits {
+            tolerance: 1e-3,
+            min_iterations: 1,
+            max_iterations: 10,
+            relaxation: 0.4,
+            warm_start: 0.0,
+        };
+        let inputs = (
+            &factors.alpha[..],
+            &factors.ghost_offset[..],
+            &factors.gradients,
+        );
+        match Jacobi::default().solve(&mut sim, 2e-3, Target::Density, limits, inputs) {
+            Err(StepError::Unstable { what, particle, .. }) => {
+                assert!(what.contains("density solve diverged"), "{what}");
+                assert_eq!(particle, Some(7));
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    /// The solve's parameters, each end of each range.
+    #[test]
+    fn the_solve_s_parameters_are_checked() {
+        let ok = |t, min, max, w, s| limits(t, min, max, w, s).is_ok();
+        assert!(ok(1e-3, 0, 1, 1.0, 0.0) && ok(0.99, 10_000, 10_000, 1e-3, 1.0));
+        let field = |t, min, max, w, s| limits(t, min, max, w, s).unwrap_err().to_string();
+        for (bad, name) in [
+            (field(0.0, 1, 10, 0.5, 0.5), "tolerance"),
+            (field(1.0, 1, 10, 0.5, 0.5), "tolerance"),
+            (field(f64::NAN, 1, 10, 0.5, 0.5), "tolerance"),
+            (field(1e-3, 1, 0, 0.5, 0.5), "max_iterations"),
+            (field(1e-3, 1, 10_001, 0.5, 0.5), "max_iterations"),
+            (field(1e-3, 11, 10, 0.5, 0.5), "min_iterations"),
+            (field(1e-3, 1, 10, 0.0, 0.5), "relaxation"),
+            (field(1e-3, 1, 10, 1.01, 0.5), "relaxation"),
+            (field(1e-3, 1, 10, f64::NAN, 0.5), "relaxation"),
+            (field(1e-3, 1, 10, 0.5, -0.01), "warm_start"),
+            (field(1e-3, 1, 10, 0.5, 1.01), "warm_start"),
+            (field(1e-3, 1, 10, 0.5, f64::NAN), "warm_start"),
+        ] {
+            assert!(bad.contains(name), "{bad} should name {name}");
+        }
+    }
+
     /// lambda_max of D^-1 A by power iteration on a periodic n x n lattice (ds = 1,
     /// m = rho = dt = 1), applying the solve's operator pair by pair as the module docs
     /// write it: a_i = -sum_j (p_i + p_j) grad W_ij, then -r_i = -sum_j (a_i - a_j) .
@@ -878,6 +1154,171 @@ mod tests {
             p = q.into_iter().map(|v| v / norm).collect();
         }
         lambda
+    }
+
+    /// The bound's search against a dense grid over the wave numbers: lambda(k) =
+    /// |sum_j grad W(x_j) sin(k . x_j)|^2 / sum_j |grad W(x_j)|^2 on a 400 x 400 grid
+    /// over [0, pi]^2, whose maximum is within 1e-4 of the true one (the peak is flat to
+    /// second order; the grid step is pi/400). The bound does not depend on the units
+    /// (ds = 0.01 m against ds = 1), and where there is nothing to bound (a spacing
+    /// that is not a positive number, a support beyond 32 ds) it is infinite.
+    #[test]
+    fn the_jacobi_bound_is_two_over_the_largest_lambda() {
+        for h in [1.3, 2.0] {
+            let kernel = Wendland::new(h);
+            let mut grads = Vec::new();
+            for i in -3i32..=3 {
+                for j in -3i32..=3 {
+                    let x = DVec2::new(i as f64, j as f64);
+                    grads.push((x, kernel.grad(x, x.length())));
+                }
+            }
+            let d: f64 = grads.iter().map(|g| g.1.length_squared()).sum();
+            let mut best = 0.0f64;
+            for a in 0..=400 {
+                for b in 0..=400 {
+                    let k = DVec2::new(a as f64, b as f64) * (std::f64::consts::PI / 400.0);
+                    let s: DVec2 = grads.iter().map(|&(x, g)| g * k.dot(x).sin()).sum();
+                    best = best.max(s.length_squared() / d);
+                }
+            }
+            let bound = jacobi_bound(&kernel, 1.0);
+            assert!(
+                (bound * best / 2.0 - 1.0).abs() < 1e-4,
+                "h/ds {h}: bound {bound}, 2 / lambda_max {}",
+                2.0 / best
+            );
+            let scaled = jacobi_bound(&Wendland::new(0.01 * h), 0.01);
+            assert!(
+                (scaled / bound - 1.0).abs() < 1e-12,
+                "{scaled} against {bound}"
+            );
+        }
+        let kernel = Wendland::new(1.3);
+        for ds in [0.0, -1.0, f64::NAN, 2.6 / 32.5] {
+            assert_eq!(jacobi_bound(&kernel, ds), f64::INFINITY, "ds {ds}");
+        }
+        assert!(jacobi_bound(&kernel, 2.6 / 31.9).is_finite());
+    }
+
+    /// A solve's report: a row per step in `<name>.csv` (iterations, error, the extra
+    /// columns) and the totals in the diagnostics, a capped step counted unconverged.
+    #[test]
+    fn the_report_counts_steps_iterations_and_capped_solves() {
+        let mut sim = crate::testing::sim(hecs::World::new());
+        sim.out_dir = crate::testing::out_dir("report");
+        let mut report = Report::default();
+        report.open(&sim, "solve", &["dt"]).unwrap();
+        let outcome = |iterations, capped| Outcome {
+            iterations,
+            error: 0.25,
+            capped,
+        };
+        for (t, o) in [
+            (0.1, outcome(5, true)),
+            (0.2, outcome(3, false)),
+            (0.3, outcome(7, true)),
+        ] {
+            report.record(&mut sim, "solve", t, o, &[1e-3]).unwrap();
+        }
+        report.flush().unwrap();
+        let d = &sim.diagnostics;
+        assert_eq!(
+            (
+                d["solve_steps"],
+                d["solve_iterations"],
+                d["solve_unconverged"]
+            ),
+            (3.0, 15.0, 2.0)
+        );
+        let text = std::fs::read_to_string(sim.out_dir.join("solve.csv")).unwrap();
+        assert_eq!(
+            text,
+            "time,iterations,error,dt\n0.1,5,0.25,0.001\n0.2,3,0.25,0.001\n0.3,7,0.25,0.001\n"
+        );
+        std::fs::remove_dir_all(&sim.out_dir).unwrap();
+    }
+
+    /// At setup the relaxation is capped at 85 % of the bound for the run's kernel and
+    /// h/ds, and the omega used goes to the diagnostics: 0.5 stays at h/ds 1.3 (bound
+    /// 0.77) and is capped at h/ds 2.0 (bound 0.35).
+    #[test]
+    fn the_relaxation_is_capped_below_the_bound() {
+        let mut limits = Limits {
+            tolerance: 1e-3,
+            min_iterations: 1,
+            max_iterations: 10,
+            relaxation: 0.5,
+            warm_start: 0.5,
+        };
+        let mut sim = crate::testing::sim(hecs::World::new());
+        cap_relaxation(&mut sim, "solve", &mut limits);
+        assert_eq!(limits.relaxation, 0.5);
+        assert_eq!(sim.diagnostics["solve_relaxation"], 0.5);
+        sim.constants.h = 0.02;
+        cap_relaxation(&mut sim, "solve", &mut limits);
+        let capped = RELAXATION_MARGIN * jacobi_bound(&Wendland::new(0.02), 0.01);
+        assert!(capped < 0.31 && capped > 0.29, "{capped}");
+        assert_eq!(limits.relaxation, capped);
+        assert_eq!(sim.diagnostics["solve_relaxation"], capped);
+    }
+
+    /// The passes refuse lists that cover another number of fluid particles, and the
+    /// no-slip shift refuses no-slip velocities or signs that are not one per ghost.
+    #[test]
+    fn the_passes_refuse_lists_and_columns_of_another_size() {
+        let sim = factored();
+        let n = archetype::<Fluid>(&sim.world).unwrap().len() as usize;
+        assert!(neighbours(&sim, n).is_ok());
+        let e = neighbours(&sim, n + 1).err().unwrap().to_string();
+        assert!(
+            e.contains(&format!(
+                "cover {n} fluid particles but the solve holds {}",
+                n + 1
+            )),
+            "{e}"
+        );
+        // Walls that do not slip: the signs and velocities must be one per ghost.
+        let mut sim = factored();
+        let ghosts = archetype::<Ghost>(&sim.world).unwrap().len() as usize;
+        sim.resources
+            .get_or_default::<Columns>()
+            .insert::<NoSlipVelocity>(NoSlipVelocity::SCOPE, vec![DVec2::ZERO; ghosts])
+            .unwrap();
+        sim.resources.insert(NoSlipSigns(vec![-1.0; ghosts]));
+        let Sim {
+            world, resources, ..
+        } = &mut sim;
+        shift_no_slip(world, resources, |_| DVec2::new(1.0, 2.0)).unwrap();
+        let ns = resources
+            .get::<Columns>()
+            .unwrap()
+            .get::<NoSlipVelocity>()
+            .unwrap()
+            .to_vec();
+        assert!(ns.iter().all(|v| *v == DVec2::new(-1.0, -2.0)));
+        resources.insert(NoSlipSigns(vec![-1.0; ghosts - 1]));
+        let e = shift_no_slip(world, resources, |_| DVec2::X)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("no-slip velocities"), "{e}");
+        resources.insert(NoSlipSigns(vec![-1.0; ghosts]));
+        resources
+            .get_mut::<Columns>()
+            .unwrap()
+            .get_mut::<NoSlipVelocity>()
+            .unwrap()
+            .pop();
+        let e = shift_no_slip(world, resources, |_| DVec2::X)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(&format!(
+                "{ghosts} ghosts but {} no-slip velocities",
+                ghosts - 1
+            )),
+            "{e}"
+        );
     }
 
     #[test]

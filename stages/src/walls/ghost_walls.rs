@@ -621,4 +621,409 @@ mod tests {
         // A checkpoint keys each stage's state by its name, the registered one.
         assert_eq!(found.name(), "ghost_walls");
     }
+
+    /// Fluid particles in the middle of [`turning_box`] ahead of the others, so that
+    /// those near the walls are beyond the first parallel chunk.
+    const PAD: usize = CHUNK + 76;
+
+    /// A 0.3 m x 0.2 m box turned 0.3 rad, displaced, and translating, turning and
+    /// accelerating both ways, with fluid particles (given in the tank frame) by its
+    /// walls and corners, one on the floor, one just off it, one beyond the support and
+    /// within the support and the skin of the floor; [`PAD`] particles in the middle
+    /// first.
+    fn turning_box() -> (Sim, sph_core::motion::Pose) {
+        use sph_core::motion::{Pose, RigidState};
+        let pose = Pose {
+            pivot: DVec2::new(0.15, 0.0),
+            state: RigidState {
+                angle: 0.3,
+                omega: -0.8,
+                alpha: 2.5,
+                offset: DVec2::new(0.02, -0.01),
+                velocity: DVec2::new(0.3, 0.1),
+                acceleration: DVec2::new(-1.2, 0.7),
+            },
+        };
+        let mut world = hecs::World::new();
+        crate::testing::closed_polygon(
+            &mut world,
+            &[(0.0, 0.0), (0.3, 0.0), (0.3, 0.2), (0.0, 0.2)],
+            |_| pose,
+        );
+        for wall in world.query_mut::<&mut WallPose>() {
+            (wall.a, wall.b) = (pose.to_world(wall.a), pose.to_world(wall.b));
+        }
+        let at = [
+            (0.005, 0.006), // the bottom left corner
+            (0.15, 0.004),  // the floor
+            (0.296, 0.1),   // the right wall
+            (0.004, 0.197), // the top left corner
+            (0.15, 0.1),    // far from every wall
+            (0.15, 5e-9),   // on the floor: no ghost
+            (0.12, 0.027),  // 0.001 beyond the support (0.026) of the floor
+            (0.291, 0.185), // the top right corner, across both walls
+            (0.2, 5e-5),    // 5e-3 ds off the floor: a ghost
+        ];
+        let middle = std::iter::repeat_n(&(0.15, 0.1), PAD);
+        for (k, &(x, y)) in middle.chain(&at).enumerate() {
+            let k = (k % 11) as f64;
+            world.spawn((
+                Fluid,
+                Position(pose.to_world(DVec2::new(x, y))),
+                Velocity(DVec2::new(0.1 * k - 0.3, 0.2 - 0.05 * k)),
+                Density(995.0 + 2.0 * k),
+                Pressure(0.0),
+                Mass(0.1 + 0.01 * k),
+            ));
+        }
+        (crate::testing::sim(world), pose)
+    }
+
+    /// What one ghost should be, from the module docs' formulas: the source mirrored
+    /// across each wall in turn (x - 2 d n, n the wall's unit normal into the fluid),
+    /// the velocity's normal part relative to the wall's velocity v_w at the foot
+    /// reversed (no slip: 2 v_w - v), the source's density carried to p_source +
+    /// rho_0 (g - a_w) . (x_ghost - x_source) on Tait (a_w the body's acceleration at
+    /// the source), the source's mass.
+    struct Expected {
+        source: usize,
+        walls: Vec<usize>,
+        x: DVec2,
+        v: DVec2,
+        no_slip: DVec2,
+        rho: f64,
+        /// The product of the walls' I - 2 n n^T.
+        reflection: [f64; 4],
+    }
+
+    fn expected(sim: &Sim, pose: &sph_core::motion::Pose, hydrostatic: bool) -> Vec<Expected> {
+        let fluid = archetype::<Fluid>(&sim.world).unwrap();
+        let fx = column::<Position>(fluid).unwrap();
+        let fv = column::<Velocity>(fluid).unwrap();
+        let fr = column::<Density>(fluid).unwrap();
+        let walls: Vec<(DVec2, DVec2)> = {
+            let mut w: Vec<(hecs::Entity, DVec2, DVec2)> = sim
+                .world
+                .query::<(hecs::Entity, &WallPose)>()
+                .iter()
+                .map(|(e, w)| (e, w.a, w.b))
+                .collect();
+            w.sort_by_key(|w| w.0.id());
+            w.iter().map(|w| (w.1, w.2)).collect()
+        };
+        let normal = |k: usize| (walls[k].1 - walls[k].0).perp().normalize();
+        let support = 0.026;
+        let near = |k: usize, x: DVec2| {
+            let (a, b) = walls[k];
+            let d = (x - a).dot(normal(k));
+            let s = (x - a).dot((b - a).normalize());
+            d > 1e-8 && d < support && s >= 0.0 && s <= (b - a).length()
+        };
+        // Tait with the test sim's water: B = rho_0 c_0^2 / gamma.
+        let (rho0, gamma) = (1000.0, 7.0);
+        let b = rho0 * 400.0 / gamma;
+        let pressure = |rho: f64| b * ((rho / rho0).powf(gamma) - 1.0);
+        let density = |p: f64| rho0 * (1.0 + p / b).powf(1.0 / gamma);
+        let g = DVec2::new(0.0, -9.81);
+        let mut out = Vec::new();
+        for s in 0..fx.len() {
+            let singles = (0..4).filter(|&k| near(k, fx[s].0)).map(|k| vec![k]);
+            // The box's corners, by first wall then second.
+            let doubles = [(0, 1), (0, 3), (1, 2), (2, 3)]
+                .into_iter()
+                .filter(|&(a, b)| near(a, fx[s].0) && near(b, fx[s].0))
+                .map(|(a, b)| vec![a, b]);
+            for ws in singles.chain(doubles).collect::<Vec<_>>() {
+                let (mut x, mut v, mut no_slip) = (fx[s].0, fv[s].0, fv[s].0);
+                let mut reflection = [1.0, 0.0, 0.0, 1.0];
+                for &k in &ws {
+                    let n = normal(k);
+                    let d = (x - walls[k].0).dot(n);
+                    let vw = pose.velocity_at(x - d * n);
+                    v -= 2.0 * (v - vw).dot(n) * n;
+                    no_slip = 2.0 * vw - no_slip;
+                    x -= 2.0 * d * n;
+                    let l = [
+                        1.0 - 2.0 * n.x * n.x,
+                        -2.0 * n.x * n.y,
+                        -2.0 * n.x * n.y,
+                        1.0 - 2.0 * n.y * n.y,
+                    ];
+                    let m = reflection;
+                    reflection = [
+                        l[0] * m[0] + l[1] * m[2],
+                        l[0] * m[1] + l[1] * m[3],
+                        l[2] * m[0] + l[3] * m[2],
+                        l[2] * m[1] + l[3] * m[3],
+                    ];
+                }
+                let g_eff = g - pose.acceleration_at(fx[s].0);
+                let rho = if hydrostatic {
+                    density(pressure(fr[s].0) + rho0 * g_eff.dot(x - fx[s].0))
+                } else {
+                    fr[s].0
+                };
+                out.push(Expected {
+                    source: s,
+                    walls: ws,
+                    x,
+                    v,
+                    no_slip,
+                    rho,
+                    reflection,
+                });
+            }
+        }
+        out
+    }
+
+    /// Checks the world's ghosts against [`expected`]; `skin`: the ghosts were found
+    /// with lasting lists, so a source beyond the support (but within the skin) has a
+    /// weightless ghost.
+    fn check_ghosts(sim: &Sim, pose: &sph_core::motion::Pose, hydrostatic: bool, no_slip: bool) {
+        let want = expected(sim, pose, hydrostatic);
+        let ghost = archetype::<Ghost>(&sim.world).unwrap();
+        let fluid = archetype::<Fluid>(&sim.world).unwrap();
+        let fm = column::<Mass>(fluid).unwrap();
+        let (gs, gw) = (
+            column::<Ghost>(ghost).unwrap(),
+            column::<MirrorWall>(ghost).unwrap(),
+        );
+        let (gx, gv) = (
+            column::<Position>(ghost).unwrap(),
+            column::<Velocity>(ghost).unwrap(),
+        );
+        let (gr, gm) = (
+            column::<Density>(ghost).unwrap(),
+            column::<Mass>(ghost).unwrap(),
+        );
+        assert_eq!(gs.len(), want.len());
+        let entities = Walls::of(&sim.world).entities().to_vec();
+        let close = |a: DVec2, b: DVec2| (a - b).length() < 1e-12;
+        let reflections = sim.resources.get::<GhostReflections>().unwrap();
+        let signs = sim.resources.get::<NoSlipSigns>();
+        let columns = sim.resources.get::<Columns>();
+        let ns = columns.and_then(|c| c.get::<NoSlipVelocity>());
+        assert_eq!(ns.is_some(), no_slip);
+        assert_eq!(signs.is_some(), no_slip);
+        for (k, e) in want.iter().enumerate() {
+            assert_eq!(gs[k].source as usize, e.source, "ghost {k}");
+            assert_eq!(gw[k].0, entities[e.walls[0]], "ghost {k}");
+            assert!(
+                close(gx[k].0, e.x),
+                "ghost {k}: x {} against {}",
+                gx[k].0,
+                e.x
+            );
+            assert!(
+                close(gv[k].0, e.v),
+                "ghost {k}: v {} against {}",
+                gv[k].0,
+                e.v
+            );
+            assert!(
+                (gr[k].0 - e.rho).abs() < 1e-9,
+                "ghost {k}: rho {} against {}",
+                gr[k].0,
+                e.rho
+            );
+            assert_eq!(gm[k].0, fm[e.source].0, "ghost {k}");
+            for (a, b) in reflections.0[k].iter().zip(e.reflection) {
+                assert!((a - b).abs() < 1e-12, "ghost {k}: {:?}", reflections.0[k]);
+            }
+            if let (Some(ns), Some(signs)) = (ns, signs) {
+                assert!(
+                    close(ns[k], e.no_slip),
+                    "ghost {k}: {} against {}",
+                    ns[k],
+                    e.no_slip
+                );
+                let sign = if e.walls.len() == 2 { 1.0 } else { -1.0 };
+                assert_eq!(signs.0[k], sign);
+            }
+        }
+    }
+
+    /// Every ghost is its formula (see [`Expected`]) in a moving, turned box, for each
+    /// slip and with and without the hydrostatic correction; a step on which fewer are
+    /// needed drops the surplus, and the rest are still their formulas.
+    #[test]
+    fn the_ghosts_are_their_formulas() {
+        for (slip, hydrostatic) in [("FreeSlip", true), ("NoSlip", true), ("NoSlip", false)] {
+            let (mut sim, pose) = turning_box();
+            sim.resources.insert(GhostReflections::default());
+            let params = format!("(slip: {slip}, hydrostatic: {hydrostatic})");
+            let mut stages = crate::testing::pipeline(&mut sim, &[("ghost_walls", &params)]);
+            stages[0].run(&mut sim).unwrap();
+            let no_slip = slip == "NoSlip";
+            check_ghosts(&sim, &pose, hydrostatic, no_slip);
+            let want = expected(&sim, &pose, hydrostatic);
+            let doubles = want.iter().filter(|e| e.walls.len() == 2).count();
+            // The three corners' 2 + 1 each, and one for each of the two particles by
+            // the floor and the one by the right wall.
+            assert_eq!((want.len(), doubles), (12, 3));
+            // The corner particle moves to the middle: its three ghosts go.
+            {
+                let fluid = archetype::<Fluid>(&sim.world).unwrap();
+                column_mut::<Position>(fluid).unwrap()[PAD].0 = pose.to_world(DVec2::new(0.1, 0.1));
+            }
+            stages[0].run(&mut sim).unwrap();
+            assert_eq!(count::<Ghost>(&sim.world), 9);
+            check_ghosts(&sim, &pose, hydrostatic, no_slip);
+        }
+    }
+
+    /// With lasting lists the ghosts are found within the support and the skin: a
+    /// source beyond the support gets a ghost without mass, which takes the source's
+    /// mass once it comes within the support (on a step that keeps the ghosts).
+    #[test]
+    fn a_ghost_found_within_the_skin_weighs_once_its_source_is_near() {
+        let (mut sim, pose) = turning_box();
+        // By the floor's start, 0.002 from the left wall's end (the floor's corner),
+        // within the skin of it along that wall.
+        sim.world.spawn((
+            Fluid,
+            Position(pose.to_world(DVec2::new(0.006, 0.002))),
+            Velocity(DVec2::ZERO),
+            Density(1000.0),
+            Pressure(0.0),
+            Mass(0.1),
+        ));
+        sim.resources.insert(Neighbours {
+            skin: 0.004,
+            ..Default::default()
+        });
+        let mut walls = stage();
+        walls.setup(&mut sim).unwrap();
+        walls.run(&mut sim).unwrap();
+        let ghost_of = |sim: &Sim, s: u32| -> (usize, f64) {
+            let ghost = archetype::<Ghost>(&sim.world).unwrap();
+            let gs = column::<Ghost>(ghost).unwrap();
+            let k = gs.iter().position(|g| g.source == s).unwrap();
+            (k, column::<Mass>(ghost).unwrap()[k].0)
+        };
+        // Particle 6, 0.001 beyond the floor's support, within its skin.
+        // The 12 of a finding without skin, particle 6's and the one on the floor's
+        // (closer than the on-wall distance), both weightless, and the last one's
+        // three (the floor, the left wall and their corner).
+        let (five, six) = (PAD as u32 + 5, PAD as u32 + 6);
+        assert_eq!(ghost_of(&sim, six).1, 0.0);
+        assert_eq!(ghost_of(&sim, five).1, 0.0);
+        assert_eq!(
+            ghost_of(&sim, PAD as u32 + 8).1,
+            0.1 + 0.01 * ((PAD + 8) % 11) as f64
+        );
+        assert_eq!(count::<Ghost>(&sim.world), 17);
+        // It comes 0.0015 closer, within the support (less than half the skin: the
+        // ghosts are kept), and its ghost now weighs its mass at the mirrored place.
+        let fluid = archetype::<Fluid>(&sim.world).unwrap();
+        let fpos: Vec<DVec2> = column::<Position>(fluid)
+            .unwrap()
+            .iter()
+            .map(|p| p.0)
+            .collect();
+        let gpos: Vec<DVec2> = {
+            let ghost = archetype::<Ghost>(&sim.world).unwrap();
+            column::<Position>(ghost)
+                .unwrap()
+                .iter()
+                .map(|p| p.0)
+                .collect()
+        };
+        let nb = sim.resources.get_mut::<Neighbours>().unwrap();
+        (nb.n_fluid, nb.n_ghost) = (fpos.len(), gpos.len());
+        nb.built_at = fpos.iter().chain(&gpos).copied().collect();
+        nb.plan = ListPlan::Undecided;
+        let moved = pose.to_world(DVec2::new(0.12, 0.0255));
+        column_mut::<Position>(fluid).unwrap()[PAD + 6].0 = moved;
+        walls.run(&mut sim).unwrap();
+        assert_eq!(
+            sim.resources.get::<Neighbours>().unwrap().plan,
+            ListPlan::Keep
+        );
+        let (k, m) = ghost_of(&sim, six);
+        assert_eq!(m, 0.1 + 0.01 * ((PAD + 6) % 11) as f64);
+        let ghost = archetype::<Ghost>(&sim.world).unwrap();
+        let x = column::<Position>(ghost).unwrap()[k].0;
+        let floor = Walls::of(&sim.world).lines()[0];
+        assert!((x - floor.mirror(moved)).length() < 1e-12);
+    }
+
+    /// The ghosts found last serve while the fluid and ghost counts and the walls are
+    /// those of the finding, and no wall end has moved half the skin.
+    #[test]
+    fn the_ghosts_are_kept_only_while_nothing_changed() {
+        let mut sim = boxed();
+        let skin = 0.004;
+        let mut walls = stage();
+        walls.setup(&mut sim).unwrap();
+        assert!(!walls.kept(&sim, skin), "nothing found yet");
+        walls.run(&mut sim).unwrap();
+        let kept = |walls: &mut GhostWalls, sim: &Sim| {
+            walls.walls.read(&sim.world);
+            walls.kept(sim, skin)
+        };
+        assert!(kept(&mut walls, &sim));
+        // A wall's end moved just under and just over half the skin, either end.
+        let floor = Walls::of(&sim.world).entities()[0];
+        for (by, kept_then) in [(0.0019, true), (0.0021, false)] {
+            for end in [0, 1] {
+                let mut w = sim.world.get::<&mut WallPose>(floor).unwrap();
+                let at = if end == 0 { &mut w.a } else { &mut w.b };
+                at.x += by;
+                drop(w);
+                assert_eq!(kept(&mut walls, &sim), kept_then, "end {end} by {by}");
+                let mut w = sim.world.get::<&mut WallPose>(floor).unwrap();
+                let at = if end == 0 { &mut w.a } else { &mut w.b };
+                at.x -= by;
+            }
+        }
+        assert!(kept(&mut walls, &sim));
+        // One more fluid particle, one more ghost, one more wall: found anew.
+        let extra = sim.world.spawn((
+            Fluid,
+            Position(DVec2::new(0.2, 0.2)),
+            Velocity(DVec2::ZERO),
+            Density(1000.0),
+            Pressure(0.0),
+            Mass(0.1),
+        ));
+        assert!(!kept(&mut walls, &sim));
+        sim.world.despawn(extra).unwrap();
+        assert!(kept(&mut walls, &sim));
+        resize_pool(&mut sim.world, walls.images.len() + 1);
+        assert!(!kept(&mut walls, &sim));
+        resize_pool(&mut sim.world, walls.images.len());
+        assert!(kept(&mut walls, &sim));
+        crate::testing::closed_polygon(
+            &mut sim.world,
+            &[(0.1, 0.1), (0.2, 0.1), (0.2, 0.2)],
+            |_| Default::default(),
+        );
+        assert!(!kept(&mut walls, &sim));
+    }
+
+    /// Setup refuses a scene without walls, shares the hydrostatic setting, and with
+    /// walls that do not slip provides the no-slip velocities and signs.
+    #[test]
+    fn setup_shares_the_settings_and_the_no_slip_columns() {
+        let mut sim = crate::testing::sim(hecs::World::new());
+        let e = stage().setup(&mut sim).unwrap_err().to_string();
+        assert!(e.contains("no walls"), "{e}");
+        for (slip, hydrostatic) in [(Slip::FreeSlip, false), (Slip::NoSlip, true)] {
+            let mut sim = boxed();
+            GhostWalls::new(Params { slip, hydrostatic })
+                .setup(&mut sim)
+                .unwrap();
+            let settings = sim.resources.get::<GhostSettings>().unwrap();
+            assert_eq!(settings.hydrostatic, hydrostatic);
+            let no_slip = slip == Slip::NoSlip;
+            assert_eq!(sim.resources.contains::<NoSlipSigns>(), no_slip);
+            let columns = sim.resources.get::<Columns>();
+            assert_eq!(
+                columns.is_some_and(|c| c.contains::<NoSlipVelocity>()),
+                no_slip
+            );
+        }
+    }
 }

@@ -117,3 +117,173 @@ pub(super) fn sample(
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::outputs::probe::tests::{scene, shepard_sum};
+    use sph_core::components::Fluid;
+    use sph_core::motion::RigidState;
+    use sph_core::world::archetype;
+
+    /// The fluid's columns as plain vectors.
+    fn fluid<T: hecs::Component + Copy>(sim: &Sim) -> Vec<T> {
+        let a = archetype::<Fluid>(&sim.world).unwrap();
+        column::<T>(a).unwrap().iter().copied().collect()
+    }
+
+    /// Every diagnostic at once, each against its definition in `Params`, summed
+    /// here: front and column height, the density fluctuations of the flow and of the
+    /// guarded particles, the speed, the neighbour counts, the roll angle and moment
+    /// about a turned, displaced pivot, and the piston's displacement and force (the
+    /// left wall, moved and leaning, as the paddle). Bound: round-off.
+    #[test]
+    fn each_diagnostic_is_its_definition() {
+        let sim = scene();
+        let all_on = Params {
+            front: true,
+            column_height: true,
+            density_fluctuation: true,
+            max_speed: true,
+            neighbours: true,
+            roll_moment: true,
+            piston: true,
+            ..Params::default()
+        };
+        let paddle = sph_core::walls::Walls::of(&sim.world).entities()[3];
+        // The paddle now: its foot 2 mm and its top 12 mm right of the wall's place,
+        // which is 10 mm right of its rest place (its top's rest x -0.01 m).
+        sim.world.get::<&mut WallPose>(paddle).unwrap().a.x += 0.012;
+        sim.world.get::<&mut WallPose>(paddle).unwrap().b.x += 0.002;
+        sim.world
+            .get::<&mut sph_core::components::Wall>(paddle)
+            .unwrap()
+            .a
+            .x = -0.01;
+        let pose = Pose {
+            pivot: DVec2::new(0.15, 0.1),
+            state: RigidState {
+                angle: 0.1,
+                offset: DVec2::new(0.01, -0.02),
+                ..Default::default()
+            },
+        };
+        let particles = Particles::of(&sim.world).unwrap();
+        let mut row = vec![-1.0];
+        sample(&all_on, Some(paddle), &sim, particles, pose, &mut row).unwrap();
+
+        let x: Vec<Position> = fluid(&sim);
+        let ds = 0.01;
+        let mut e = vec![-1.0];
+        // The bottom row's last particle at 0.115 m, the left column's top at 0.075 m
+        // (the drop ahead of the front is off the floor, the one above the column
+        // away from the wall).
+        let front = x.iter().filter(|q| q.0.y < ds).map(|q| q.0.x);
+        e.push(front.fold(f64::NEG_INFINITY, f64::max) + 0.5 * ds);
+        assert!((e[1] - 0.12).abs() < 1e-15);
+        let height = x.iter().filter(|q| q.0.x < ds).map(|q| q.0.y);
+        e.push(height.fold(f64::NEG_INFINITY, f64::max) + 0.5 * ds);
+        assert!((e[2] - 0.08).abs() < 1e-15);
+        let (rho, flags) = (fluid::<Density>(&sim), fluid::<Guarded>(&sim));
+        let dev = |i: usize| (rho[i].0 / 1000.0 - 1.0).abs();
+        let of = |guarded: bool| {
+            let picked = (0..x.len()).filter(|&i| flags[i].untouched() != guarded);
+            picked.map(dev).fold(f64::NEG_INFINITY, f64::max)
+        };
+        let guarded = flags.iter().filter(|f| !f.untouched()).count();
+        assert!(guarded > 0 && guarded < x.len());
+        e.extend([of(false), of(true), guarded as f64, 0.0, 0.0]);
+        // The largest fluctuations differ (the flagged particles' density is 998).
+        assert!(e[3] != e[4]);
+        let v = fluid::<Velocity>(&sim);
+        e.push(
+            v.iter()
+                .map(|v| v.0.length())
+                .fold(f64::NEG_INFINITY, f64::max),
+        );
+        let n: Vec<f64> = fluid::<sph_core::components::NeighbourCount>(&sim)
+            .iter()
+            .map(|c| c.0 as f64)
+            .collect();
+        let mean = n.iter().sum::<f64>() / n.len() as f64;
+        e.extend([
+            n.iter().copied().fold(f64::INFINITY, f64::min),
+            mean,
+            n.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+        ]);
+        assert!(e[9] < e[10] && e[10] < e[11], "{:?}", &e[9..12]);
+        let (a, m) = (fluid::<Acceleration>(&sim), fluid::<Mass>(&sim));
+        let centre = pose.to_world(pose.pivot);
+        let g = DVec2::new(0.0, -9.81);
+        let mut moment = 0.0;
+        for i in 0..x.len() {
+            let (r, f) = (x[i].0 - centre, m[i].0 * (g - a[i].0));
+            moment += r.x * f.y - r.y * f.x;
+        }
+        e.extend([0.1f64.to_degrees(), moment]);
+        // The paddle: x its top's displacement from rest, and F = -n_x times the
+        // integral of p over its length (n its unit normal into the fluid, tilted
+        // from +x by the paddle's lean), by the midpoint rule in steps of about ds.
+        let wall = *sim.world.get::<&WallPose>(paddle).unwrap();
+        let length = (wall.b - wall.a).length();
+        let steps = (length / ds).ceil();
+        assert_eq!(steps, 21.0);
+        let force: f64 = (0..21)
+            .map(|i| shepard_sum(&sim, wall.point((i as f64 + 0.5) * length / steps)))
+            .sum::<f64>()
+            * (length / steps);
+        assert!(force > 0.0);
+        let n = (wall.b - wall.a).perp().normalize();
+        assert!(n.x > 0.99 && n.x < 0.999);
+        e.extend([0.012 + 0.01, -n.x * force]);
+        assert_eq!(row.len(), e.len());
+        for (k, (got, want)) in row.iter().zip(&e).enumerate() {
+            assert!(
+                (got - want).abs() <= 1e-9 * want.abs().max(1.0),
+                "column {k}: {got} against {want}"
+            );
+        }
+        // Each flag alone writes its own columns only.
+        let alone = |p: Params, piston| {
+            let mut row = Vec::new();
+            sample(&p, piston, &sim, particles, pose, &mut row).unwrap();
+            row
+        };
+        let none = Params {
+            methods: Vec::new(),
+            ..Params::default()
+        };
+        assert!(alone(none.clone(), None).is_empty());
+        let only = |f: fn(&mut Params)| {
+            let mut p = none.clone();
+            f(&mut p);
+            p
+        };
+        assert_eq!(alone(only(|p| p.front = true), None), e[1..2]);
+        assert_eq!(alone(only(|p| p.column_height = true), None), e[2..3]);
+        assert_eq!(alone(only(|p| p.max_speed = true), None), e[8..9]);
+        assert_eq!(alone(only(|p| p.roll_moment = true), None).len(), 2);
+        assert_eq!(alone(only(|p| p.piston = true), Some(paddle)).len(), 2);
+    }
+
+    /// M = sum_i m_i (x_i - P) x (g - a_i): a particle straight right of the pivot
+    /// under gravity alone turns clockwise (negative), one on the left the other way.
+    #[test]
+    fn the_roll_moment_is_counter_clockwise_positive() {
+        let m = roll_moment(
+            &[
+                Position(DVec2::new(1.0, 0.0)),
+                Position(DVec2::new(-0.5, 2.0)),
+            ],
+            &[
+                Acceleration(DVec2::ZERO),
+                Acceleration(DVec2::new(1.0, 0.0)),
+            ],
+            &[Mass(2.0), Mass(3.0)],
+            DVec2::ZERO,
+            DVec2::new(0.0, -10.0),
+        );
+        // 2 (1 x -10) + 3 ((-0.5)(-10) - 2(-1)) = -20 + 21.
+        assert!((m - 1.0).abs() < 1e-12, "{m}");
+    }
+}

@@ -63,3 +63,90 @@ pub(super) fn elevation(
     }
     Ok(y)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::outputs::probe::tests::{all, scene};
+    use sph_core::motion::RigidState;
+
+    /// The gauge's march, written out: the fluid fraction phi(y) = sum_j V_j W_j over
+    /// every particle on the line x (world point `to_world(x, y)`), from y = ds/2 up in
+    /// steps of ds/4 until phi < 1/2, interpolated linearly; 0 if phi < 1/2 at the foot.
+    fn marched(sim: &Sim, to_world: impl Fn(f64) -> DVec2) -> f64 {
+        let particles = all(sim);
+        let phi = |y: f64| -> f64 {
+            let at = to_world(y);
+            particles
+                .iter()
+                .map(|&(x, _, rho, m)| {
+                    let w = kernel::w(kernel::KernelKind::Wendland, 0.013, (at - x).length());
+                    m / rho * w
+                })
+                .sum()
+        };
+        let (mut y, mut f) = (0.005, phi(0.005));
+        if f < 0.5 {
+            return 0.0;
+        }
+        loop {
+            let f1 = phi(y + 0.0025);
+            if f1 < 0.5 {
+                return y + 0.0025 * (f - 0.5) / (f - f1);
+            }
+            (y, f) = (y + 0.0025, f1);
+        }
+    }
+
+    fn elevation_at(sim: &Sim, x: f64, frame: Option<Pose>) -> f64 {
+        elevation(sim, Particles::of(&sim.world).unwrap(), x, frame).unwrap()
+    }
+
+    /// The gauge is its march ([`marched`]) in the world frame and in a displaced,
+    /// turned tank frame; over the block it reads the water's depth, 0.08 m, to within
+    /// 0.1 ds; dry beyond the block and without the grid.
+    #[test]
+    fn a_gauge_reads_where_the_fluid_fraction_falls_to_one_half() {
+        let mut sim = scene();
+        for x in [0.005, 0.05, 0.1149, 0.2] {
+            let e = marched(&sim, |y| DVec2::new(x, y));
+            let got = elevation_at(&sim, x, None);
+            assert!((got - e).abs() < 1e-12, "x {x}: {got} against {e}");
+        }
+        // The block's surface: its top row at 0.075 m, a half spacing below the
+        // surface of the water it stands for.
+        let depth = elevation_at(&sim, 0.05, None);
+        assert!((depth - 0.08).abs() < 1e-3, "{depth}");
+        assert_eq!(elevation_at(&sim, 0.2, None), 0.0);
+        let pose = Pose {
+            pivot: DVec2::new(0.05, 0.0),
+            state: RigidState {
+                angle: 0.05,
+                offset: DVec2::new(0.003, 0.01),
+                ..Default::default()
+            },
+        };
+        for x in [0.03, 0.06] {
+            let e = marched(&sim, |y| pose.to_world(DVec2::new(x, y)));
+            let got = elevation_at(&sim, x, Some(pose));
+            assert!((got - e).abs() < 1e-12, "x {x}: {got} against {e}");
+            assert!((got - elevation_at(&sim, x, None)).abs() > 1e-4);
+        }
+        sim.resources.take::<Neighbours>();
+        assert_eq!(elevation_at(&sim, 0.05, None), 0.0);
+    }
+
+    /// A non-finite fluid fraction at the gauge's foot reads dry (the run's guard
+    /// reports the particle).
+    #[test]
+    fn a_non_finite_fraction_reads_dry() {
+        let sim = scene();
+        {
+            let fluid = sph_core::world::archetype::<sph_core::components::Fluid>(&sim.world);
+            let mut rho = sph_core::world::column_mut::<Density>(fluid.unwrap()).unwrap();
+            rho[0].0 = f64::NAN;
+        }
+        assert_eq!(elevation_at(&sim, 0.005, None), 0.0);
+        assert!(elevation_at(&sim, 0.1, None) > 0.07);
+    }
+}

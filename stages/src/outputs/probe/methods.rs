@@ -203,3 +203,263 @@ impl ExtractionMethod for Averaged {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::outputs::probe::tests::{all, scene, shepard_sum, wall, N_FLUID};
+    use sph_core::components::{Fluid, Velocity, WallPose};
+    use sph_core::extraction::Carry;
+
+    /// The effective gravity of the carry: an accelerating frame's, not straight down.
+    const G_EFF: DVec2 = DVec2::new(0.3, -9.81);
+
+    fn site(wall: &WallPose, along: f64, width: f64) -> Site<'_> {
+        Site {
+            wall,
+            along,
+            width,
+            carry: Carry {
+                rho0: 1000.0,
+                g: G_EFF,
+            },
+        }
+    }
+
+    fn read(method: &mut dyn ExtractionMethod, sim: &Sim, site: &Site) -> f64 {
+        let particles = Particles::of(&sim.world).unwrap();
+        method.pressure(sim, particles, site).unwrap()
+    }
+
+    /// Method I is sum_j p_j W_j V_j / sum_j W_j V_j over the fluid and the ghosts
+    /// (`shepard_sum`, over every particle); 0 where nothing is within the support,
+    /// and without the grid. Bound: round-off.
+    #[test]
+    fn shepard_interpolates_fluid_and_ghost_pressures() {
+        let mut sim = scene();
+        let floor = wall(&sim, 0);
+        let left = wall(&sim, 3);
+        for (wall, along) in [
+            (&floor, 0.005),
+            (&floor, 0.0625),
+            (&floor, 0.118),
+            (&left, 0.17),
+        ] {
+            let e = shepard_sum(&sim, wall.point(along));
+            let got = read(&mut Shepard, &sim, &site(wall, along, 0.0));
+            assert!((got - e).abs() < 1e-9, "{along}: {got} against {e}");
+        }
+        // The left wall's top is dry.
+        assert_eq!(read(&mut Shepard, &sim, &site(&left, 0.01, 0.0)), 0.0);
+        assert!(Shepard.needs_grid());
+        sim.resources.take::<Neighbours>();
+        assert_eq!(read(&mut Shepard, &sim, &site(&floor, 0.0625, 0.0)), 0.0);
+    }
+
+    /// Method II takes the nearest fluid particle within the support (ghosts do not
+    /// count), its pressure carried to the sensor, p_n + rho_0 g_eff . (x_s - x_n);
+    /// with the grid and by a scan of every particle alike; 0 when dry.
+    #[test]
+    fn nearest_takes_the_nearest_fluid_particle_carried_to_the_sensor() {
+        let mut sim = scene();
+        let (floor, left) = (wall(&sim, 0), wall(&sim, 3));
+        let fluid: Vec<_> = all(&sim).into_iter().take(N_FLUID).collect();
+        let cases = [
+            (&floor, 0.0625),
+            (&floor, 0.1149),
+            (&left, 0.171),
+            (&left, 0.01),
+        ];
+        let expected: Vec<f64> = cases
+            .iter()
+            .map(|(wall, along)| {
+                let at = wall.point(*along);
+                let near = (0..fluid.len())
+                    .map(|i| ((fluid[i].0 - at).length_squared(), i))
+                    .filter(|(d2, _)| *d2 < 0.026 * 0.026)
+                    .min_by(|a, b| a.partial_cmp(b).unwrap());
+                near.map_or(0.0, |(_, i)| {
+                    fluid[i].1 + 1000.0 * G_EFF.dot(at - fluid[i].0)
+                })
+            })
+            .collect();
+        assert_eq!(expected[3], 0.0, "the left wall's top is dry");
+        for grid in [true, false] {
+            if !grid {
+                sim.resources.take::<Neighbours>();
+            }
+            for ((wall, along), e) in cases.iter().zip(&expected) {
+                let got = read(&mut Nearest, &sim, &site(wall, *along, 0.0));
+                assert!(
+                    (got - e).abs() < 1e-9,
+                    "grid {grid}, {along}: {got} against {e}"
+                );
+            }
+        }
+        assert!(!Nearest.needs_grid());
+    }
+
+    /// Of two fluid particles equally near the sensor, the lower index is read, with
+    /// the grid and without.
+    #[test]
+    fn nearest_breaks_ties_by_index() {
+        for first in [100.0, 200.0] {
+            let mut world = hecs::World::new();
+            crate::testing::closed_box(&mut world, 0.5, 0.5);
+            // Both 0.0125 from the floor's point at 0.25 (exact in binary).
+            for (x, p) in [(0.2375, first), (0.2625, 300.0 - first)] {
+                world.spawn((
+                    Fluid,
+                    Position(DVec2::new(x, 0.0)),
+                    Velocity(DVec2::ZERO),
+                    Density(1000.0),
+                    Pressure(p),
+                    Mass(0.1),
+                ));
+            }
+            let mut sim = crate::testing::sim(world);
+            let stages = [("neighbour_grid", "(sort_every: 0, skin: 0.0)")];
+            for mut stage in crate::testing::pipeline(&mut sim, &stages) {
+                stage.run(&mut sim).unwrap();
+            }
+            let floor = wall(&sim, 0);
+            let at = floor.point(0.25);
+            let e = first + 1000.0 * G_EFF.dot(at - DVec2::new(0.2375, 0.0));
+            for grid in [true, false] {
+                if !grid {
+                    sim.resources.take::<Neighbours>();
+                }
+                let got = read(&mut Nearest, &sim, &site(&floor, 0.25, 0.0));
+                assert!((got - e).abs() < 1e-9, "grid {grid}: {got} against {e}");
+            }
+        }
+    }
+
+    /// Method III from its formula: the fluid particles within 1.5 h of the wall whose
+    /// abscissa a lies on the face [lo, hi] (the face narrowed about its centre to fit
+    /// on the wall), carried to their foot on the wall, sorted by a, weighted by
+    /// (a_{k+1} - a_{k-1})/2 with lo and hi closing the ends; with a face of no width,
+    /// the plain mean of the particles on its abscissa.
+    fn oger(sim: &Sim, wall: &WallPose, along: f64, width: f64) -> f64 {
+        let fit = (0.5 * width).min(along).min(wall.length() - along);
+        let half = if fit > 0.0 { fit } else { 0.5 * width };
+        let (lo, hi) = (along - half, along + half);
+        let mut samples: Vec<(f64, f64)> = all(sim)
+            .into_iter()
+            .take(sph_core::world::count::<sph_core::components::Fluid>(
+                &sim.world,
+            ))
+            .filter_map(|(x, p, _, _)| {
+                let (d, a) = (wall.distance(x), wall.abscissa(x));
+                ((0.0..1.5 * 0.013).contains(&d) && a >= lo && a <= hi)
+                    .then(|| (a, p + 1000.0 * G_EFF.dot(-d * wall.normal())))
+            })
+            .collect();
+        if samples.is_empty() {
+            return 0.0;
+        }
+        samples.sort_by(|a, b| a.partial_cmp(b).unwrap());
+        let n = samples.len();
+        let q = |k: usize| samples[k].0;
+        let (mut num, mut den) = (0.0, 0.0);
+        for (k, &(_, p)) in samples.iter().enumerate() {
+            let before = if k == 0 { lo } else { q(k - 1) };
+            let after = if k + 1 == n { hi } else { q(k + 1) };
+            num += p * 0.5 * (after - before);
+            den += 0.5 * (after - before);
+        }
+        if den > 0.0 {
+            num / den
+        } else {
+            samples.iter().map(|s| s.1).sum::<f64>() / n as f64
+        }
+    }
+
+    /// Method III against [`oger`], with the grid and by a scan alike: mid-floor, a
+    /// face narrowed at the floor's start and at the left wall's end (both by the
+    /// corner), the left wall, a face of no width on a column of particles, the dry
+    /// top, and a face centred on the floor's end.
+    #[test]
+    fn averaged_is_oger_s_weighted_mean_over_the_face() {
+        let mut sim = scene();
+        let (floor, left, top) = (wall(&sim, 0), wall(&sim, 3), wall(&sim, 2));
+        // A particle's own abscissa, for the face of no width.
+        let column_x = all(&sim)[8 * 5].0.x;
+        let cases = [
+            (&floor, 0.0625, 0.03),
+            (&floor, 0.005, 0.03),
+            (&left, 0.196, 0.03),
+            (&left, 0.17, 0.02),
+            (&floor, column_x, 0.0),
+            (&top, 0.15, 0.03),
+            // At the wall's very end there is nothing to narrow about: the whole face.
+            (&floor, 0.0, 0.03),
+            // A face four supports wide (narrowed by the corner to 0.0125-0.1125 m):
+            // the grid's candidates must come from all along it.
+            (&floor, 0.0625, 0.1),
+        ];
+        let expected: Vec<f64> = cases
+            .iter()
+            .map(|(w, a, s)| oger(&sim, w, *a, *s))
+            .collect();
+        assert_eq!(expected[5], 0.0, "the top is dry");
+        for grid in [true, false] {
+            if !grid {
+                sim.resources.take::<Neighbours>();
+            }
+            let mut method = Averaged::default();
+            for ((wall, along, width), e) in cases.iter().zip(&expected) {
+                let got = read(&mut method, &sim, &site(wall, *along, *width));
+                assert!(
+                    (got - e).abs() < 1e-9,
+                    "grid {grid}, {along} {width}: {got} against {e}"
+                );
+            }
+        }
+    }
+
+    /// The grid serves only when it indexes the fluid as it is: with a particle added
+    /// since it was built, or a grid not built yet (no cells), the methods scan every
+    /// particle and find what a current grid would.
+    #[test]
+    fn a_stale_or_empty_grid_is_not_used() {
+        use sph_core::components::{Acceleration, NeighbourCount};
+        use sph_core::vocab::Guarded;
+        let mut sim = scene();
+        let floor = wall(&sim, 0);
+        // A particle close to the floor's point 0.0625, pressed, added after the grid.
+        let x = DVec2::new(0.0625, 0.002);
+        sim.world.spawn((
+            Fluid,
+            Position(x),
+            Velocity(DVec2::ZERO),
+            Density(1000.0),
+            Pressure(5000.0),
+            Mass(0.1),
+            Acceleration(DVec2::ZERO),
+            Guarded(0),
+            NeighbourCount(0),
+        ));
+        let at = floor.point(0.0625);
+        let e = 5000.0 + 1000.0 * G_EFF.dot(at - x);
+        let got = read(&mut Nearest, &sim, &site(&floor, 0.0625, 0.0));
+        assert!((got - e).abs() < 1e-9, "{got} against {e}");
+        let mut averaged = Averaged::default();
+        let face = read(&mut averaged, &sim, &site(&floor, 0.0625, 0.03));
+        let e = oger(&sim, &floor, 0.0625, 0.03);
+        assert!((face - e).abs() < 1e-9, "{face} against {e}");
+        // A grid that covers the fluid's count but has no cells yet.
+        let sim = {
+            let mut sim = scene();
+            sim.resources.insert(Neighbours {
+                n_fluid: N_FLUID,
+                ..Default::default()
+            });
+            sim
+        };
+        let e = oger(&sim, &floor, 0.0625, 0.03);
+        let got = read(&mut Averaged::default(), &sim, &site(&floor, 0.0625, 0.03));
+        assert!(e != 0.0 && (got - e).abs() < 1e-9, "{got} against {e}");
+        assert!(read(&mut Nearest, &sim, &site(&floor, 0.0625, 0.0)) != 0.0);
+    }
+}
