@@ -62,25 +62,7 @@ pub fn series(path: &Path, name: &str) -> Vec<(f64, f64)> {
     rows.iter().map(|r| (r[0], r[k])).collect()
 }
 
-/// The larger of `a` and `b`, or NaN if either is NaN: a fold over measurements with
-/// it (`.fold(0.0, nan_max)`) ends NaN if any sample was, where `f64::max` would drop
-/// the NaN and let a bound check pass on the other samples.
-pub fn nan_max(a: f64, b: f64) -> f64 {
-    if a.is_nan() || b.is_nan() {
-        f64::NAN
-    } else {
-        a.max(b)
-    }
-}
-
-/// The smaller of two values, NaN if either is: the minimum's fold, as [`nan_max`].
-pub fn nan_min(a: f64, b: f64) -> f64 {
-    if a.is_nan() || b.is_nan() {
-        f64::NAN
-    } else {
-        a.min(b)
-    }
-}
+pub use sph_core::extremes::{nan_max, nan_min};
 
 /// Reference data shipped in tests/data, sorted by its first column.
 pub fn reference(file: &str) -> Vec<(f64, f64)> {
@@ -121,36 +103,4 @@ pub fn assert_no_wall_reflections(summary: &Summary) {
         "{:?}",
         summary.diagnostics
     );
-}
-
-#[cfg(test)]
-mod tests {
-    use super::{nan_max, nan_min};
-
-    #[test]
-    fn nan_max_keeps_a_nan_sample() {
-        assert_eq!([1.0, 3.0, 2.0].into_iter().fold(0.0, nan_max), 3.0);
-        assert_eq!([-1.0].into_iter().fold(f64::NEG_INFINITY, nan_max), -1.0);
-        assert_eq!(
-            [1.0, -3.0, 2.0].into_iter().fold(f64::INFINITY, nan_min),
-            -3.0
-        );
-        assert!([1.0, f64::NAN, 2.0]
-            .into_iter()
-            .fold(f64::INFINITY, nan_min)
-            .is_nan());
-        for at in 0..3 {
-            let mut v = [1.0, 3.0, 2.0];
-            v[at] = f64::NAN;
-            assert!(
-                v.into_iter().fold(0.0, nan_max).is_nan(),
-                "NaN at {at} dropped"
-            );
-            // What f64::max does: the NaN is lost.
-            assert_eq!(
-                v.into_iter().fold(0.0, f64::max),
-                if at == 1 { 2.0 } else { 3.0 }
-            );
-        }
-    }
 }

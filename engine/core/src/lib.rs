@@ -15,6 +15,7 @@ pub mod checkpoint;
 pub mod components;
 pub mod contract;
 pub mod extraction;
+pub mod extremes;
 pub mod kernel;
 pub mod kinematics;
 pub mod motion;

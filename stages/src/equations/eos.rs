@@ -131,7 +131,7 @@ mod tests {
                 .query::<&Pressure>()
                 .iter()
                 .map(|p| p.0)
-                .fold(f64::INFINITY, f64::min);
+                .fold(f64::INFINITY, sph_core::extremes::nan_min);
             assert_eq!(lowest < 0.0, floor.is_none(), "lowest pressure {lowest}");
         }
     }

@@ -337,6 +337,7 @@ fn unstable(what: &str, sim: &Sim, i: usize) -> StepError {
 mod tests {
     use super::*;
     use crate::pressure_solve::limits;
+    use sph_core::extremes::nan_max;
     use sph_core::kernel::Kernel;
 
     fn solve_with(p: Params) -> DensitySolve {
@@ -519,7 +520,7 @@ mod tests {
                 }
                 a.length()
             })
-            .fold(0.0, f64::max)
+            .fold(0.0, nan_max)
     }
 
     /// One DFSPH step's density solve on a block of water falling in a box corner:

@@ -785,7 +785,9 @@ mod tests {
             let carried = (0..fx.len())
                 .filter(|&f| (x.0 - fx[f].0).length() < support)
                 .map(|f| fp[f].0 + fr[f].0 * g.dot(x.0 - fx[f].0))
-                .fold(None, |m: Option<f64>, c| Some(m.map_or(c, |m| m.max(c))));
+                .fold(None, |m: Option<f64>, c| {
+                    Some(m.map_or(c, |m| sph_core::extremes::nan_max(m, c)))
+                });
             match carried {
                 Some(c) => {
                     wetted += 1;

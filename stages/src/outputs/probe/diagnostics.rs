@@ -123,6 +123,7 @@ mod tests {
     use super::*;
     use crate::outputs::probe::tests::{scene, shepard_sum};
     use sph_core::components::Fluid;
+    use sph_core::extremes::{nan_max, nan_min};
     use sph_core::motion::RigidState;
     use sph_core::world::archetype;
 
@@ -179,16 +180,16 @@ mod tests {
         // (the drop ahead of the front is off the floor, the one above the column
         // away from the wall).
         let front = x.iter().filter(|q| q.0.y < ds).map(|q| q.0.x);
-        e.push(front.fold(f64::NEG_INFINITY, f64::max) + 0.5 * ds);
+        e.push(front.fold(f64::NEG_INFINITY, nan_max) + 0.5 * ds);
         assert!((e[1] - 0.12).abs() < 1e-15);
         let height = x.iter().filter(|q| q.0.x < ds).map(|q| q.0.y);
-        e.push(height.fold(f64::NEG_INFINITY, f64::max) + 0.5 * ds);
+        e.push(height.fold(f64::NEG_INFINITY, nan_max) + 0.5 * ds);
         assert!((e[2] - 0.08).abs() < 1e-15);
         let (rho, flags) = (fluid::<Density>(&sim), fluid::<Guarded>(&sim));
         let dev = |i: usize| (rho[i].0 / 1000.0 - 1.0).abs();
         let of = |guarded: bool| {
             let picked = (0..x.len()).filter(|&i| flags[i].untouched() != guarded);
-            picked.map(dev).fold(f64::NEG_INFINITY, f64::max)
+            picked.map(dev).fold(f64::NEG_INFINITY, nan_max)
         };
         let guarded = flags.iter().filter(|f| !f.untouched()).count();
         assert!(guarded > 0 && guarded < x.len());
@@ -199,7 +200,7 @@ mod tests {
         e.push(
             v.iter()
                 .map(|v| v.0.length())
-                .fold(f64::NEG_INFINITY, f64::max),
+                .fold(f64::NEG_INFINITY, nan_max),
         );
         let n: Vec<f64> = fluid::<sph_core::components::NeighbourCount>(&sim)
             .iter()
@@ -207,9 +208,9 @@ mod tests {
             .collect();
         let mean = n.iter().sum::<f64>() / n.len() as f64;
         e.extend([
-            n.iter().copied().fold(f64::INFINITY, f64::min),
+            n.iter().copied().fold(f64::INFINITY, nan_min),
             mean,
-            n.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+            n.iter().copied().fold(f64::NEG_INFINITY, nan_max),
         ]);
         assert!(e[9] < e[10] && e[10] < e[11], "{:?}", &e[9..12]);
         let (a, m) = (fluid::<Acceleration>(&sim), fluid::<Mass>(&sim));
