@@ -147,3 +147,45 @@ pub(crate) fn lattice(nx: usize, ny: usize) -> impl Iterator<Item = (usize, usiz
         })
     })
 }
+
+/// The fluid's column `T`, each value read through `f` (e.g. `|p: &Position| p.0`).
+pub(crate) fn fluid_column<T: hecs::Component, U>(sim: &Sim, f: impl Fn(&T) -> U) -> Vec<U> {
+    let fluid = sph_core::world::archetype::<Fluid>(&sim.world).unwrap();
+    sph_core::world::column::<T>(fluid)
+        .unwrap()
+        .iter()
+        .map(f)
+        .collect()
+}
+
+/// Each ghost's source (its fluid particle's index), in the ghosts' order; none
+/// without ghosts.
+pub(crate) fn ghost_sources(sim: &Sim) -> Vec<usize> {
+    use sph_core::world::{archetype, column};
+    archetype::<Ghost>(&sim.world)
+        .map(|g| {
+            column::<Ghost>(g)
+                .unwrap()
+                .iter()
+                .map(|g| g.source as usize)
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+/// D rho_i/Dt = sum_j m_j (v_i - v_j) . grad_i W_ij (the `Continuity` term) of particle
+/// `i` of `all` ([`everyone`]), summed over every particle within the support of the
+/// test sim's kernel (Wendland, h 0.013 m), not the neighbour lists.
+pub(crate) fn continuity_by_hand(all: &[(DVec2, DVec2, f64, f64, f64)], i: usize) -> f64 {
+    use sph_core::kernel::{Kernel, Wendland};
+    let kernel = Wendland::new(0.013);
+    let (xi, vi) = (all[i].0, all[i].1);
+    let mut rate = 0.0;
+    for (j, &(xj, vj, mj, _, _)) in all.iter().enumerate() {
+        let d = xi - xj;
+        if j != i && d.length() < kernel.support() {
+            rate += mj * (vi - vj).dot(kernel.grad(d, d.length()));
+        }
+    }
+    rate
+}

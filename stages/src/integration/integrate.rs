@@ -560,7 +560,7 @@ fn unstable(what: &str, i: usize, x: DVec2) -> StepError {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testing::{closed_box, pipeline, sim};
+    use crate::testing::{closed_box, fluid_column, pipeline, sim};
     use sph_core::sim::Counter;
 
     /// One fluid particle's state: position, velocity, density, and the rates the
@@ -612,36 +612,16 @@ mod tests {
     }
 
     fn positions(sim: &Sim) -> Vec<DVec2> {
-        let fluid = archetype::<Fluid>(&sim.world).unwrap();
-        column::<Position>(fluid)
-            .unwrap()
-            .iter()
-            .map(|p| p.0)
-            .collect()
+        fluid_column(sim, |p: &Position| p.0)
     }
     fn velocities(sim: &Sim) -> Vec<DVec2> {
-        let fluid = archetype::<Fluid>(&sim.world).unwrap();
-        column::<Velocity>(fluid)
-            .unwrap()
-            .iter()
-            .map(|v| v.0)
-            .collect()
+        fluid_column(sim, |v: &Velocity| v.0)
     }
     fn densities(sim: &Sim) -> Vec<f64> {
-        let fluid = archetype::<Fluid>(&sim.world).unwrap();
-        column::<Density>(fluid)
-            .unwrap()
-            .iter()
-            .map(|r| r.0)
-            .collect()
+        fluid_column(sim, |r: &Density| r.0)
     }
     fn guards(sim: &Sim) -> Vec<u8> {
-        let fluid = archetype::<Fluid>(&sim.world).unwrap();
-        column::<Guarded>(fluid)
-            .unwrap()
-            .iter()
-            .map(|g| g.0)
-            .collect()
+        fluid_column(sim, |g: &Guarded| g.0)
     }
 
     /// The failure of one step: what, which particle, where.

@@ -489,15 +489,7 @@ mod tests {
     /// column holds, a ghost's its source's plus its carry (at least 0).
     fn start_by_hand(sim: &Sim) -> f64 {
         let carries = &sim.resources.get::<DfsphFactors>().unwrap().ghost_offset;
-        let sources: Vec<usize> = archetype::<Ghost>(&sim.world)
-            .map(|g| {
-                column::<Ghost>(g)
-                    .unwrap()
-                    .iter()
-                    .map(|g| g.source as usize)
-                    .collect()
-            })
-            .unwrap_or_default();
+        let sources = crate::testing::ghost_sources(sim);
         let mut all = crate::testing::everyone(sim);
         let n = all.len() - sources.len();
         for (k, &s) in sources.iter().enumerate() {
@@ -607,17 +599,9 @@ mod tests {
         // With the continuity floor (DfsphFactor's default) the density column is left
         // at the predicted rho + dt D rho/Dt, the rate summed here by brute force
         // over every particle within the support at the final velocities.
-        let kernel = sph_core::kernel::Wendland::new(0.013);
         let all = crate::testing::everyone(&sim);
         for i in 0..v0.len() {
-            let mut rate = 0.0;
-            for (j, p) in all.iter().enumerate() {
-                let d = all[i].0 - p.0;
-                if j != i && d.length() < 0.026 {
-                    rate += p.2 * (all[i].1 - p.1).dot(kernel.grad(d, d.length()));
-                }
-            }
-            let e = rho0[i] + dt * rate;
+            let e = rho0[i] + dt * crate::testing::continuity_by_hand(&all, i);
             assert!(
                 (all[i].3 - e).abs() < 1e-9,
                 "rho {i}: {} against {e}",

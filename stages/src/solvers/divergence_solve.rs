@@ -147,7 +147,7 @@ impl Stage for DivergenceSolve {
 mod tests {
     use super::*;
     use glam::DVec2;
-    use sph_core::kernel::{Kernel, Wendland};
+    use sph_core::extremes::nan_max;
     use sph_core::world::column;
 
     /// A block of water in a box corner whose velocities converge on a point inside
@@ -187,24 +187,10 @@ mod tests {
     /// The mean of max(dt D rho_i/Dt, 0) / rho_0 over the fluid, by brute force over
     /// every particle within the support.
     fn divergence_error(sim: &Sim, dt: f64) -> f64 {
-        let all: Vec<(DVec2, DVec2, f64)> = crate::testing::everyone(sim)
-            .into_iter()
-            .map(|(x, v, m, _, _)| (x, v, m))
-            .collect();
+        let all = crate::testing::everyone(sim);
         let n = archetype::<Fluid>(&sim.world).unwrap().len() as usize;
-        let kernel = Wendland::new(sim.constants.h);
-        let mut sum = 0.0;
-        for i in 0..n {
-            let mut rate = 0.0;
-            for (j, &(xj, vj, mj)) in all.iter().enumerate() {
-                let d = all[i].0 - xj;
-                if j != i && d.length() < kernel.support() {
-                    rate += mj * (all[i].1 - vj).dot(kernel.grad(d, d.length()));
-                }
-            }
-            sum += (dt * rate).max(0.0);
-        }
-        sum / (n as f64 * 1000.0)
+        let compression = |i| nan_max(dt * crate::testing::continuity_by_hand(&all, i), 0.0);
+        (0..n).map(compression).sum::<f64>() / (n as f64 * 1000.0)
     }
 
     /// The solve brings a converging flow within its tolerance (checked by brute

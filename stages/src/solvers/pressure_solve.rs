@@ -826,15 +826,7 @@ mod tests {
         let n = archetype::<Fluid>(&sim.world).unwrap().len() as usize;
         let factors = sim.resources.get::<DfsphFactors>().unwrap();
         let mirror = sim.resources.get::<GhostReflections>().unwrap();
-        let sources: Vec<usize> = archetype::<Ghost>(&sim.world)
-            .map(|g| {
-                column::<Ghost>(g)
-                    .unwrap()
-                    .iter()
-                    .map(|g| g.source as usize)
-                    .collect()
-            })
-            .unwrap_or_default();
+        let sources = crate::testing::ghost_sources(sim);
         let kernel = Wendland::new(sim.constants.h);
         let support = kernel.support();
         let x: Vec<DVec2> = all.iter().map(|a| a.0).collect();

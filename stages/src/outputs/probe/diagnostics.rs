@@ -122,15 +122,12 @@ pub(super) fn sample(
 mod tests {
     use super::*;
     use crate::outputs::probe::tests::{scene, shepard_sum};
-    use sph_core::components::Fluid;
     use sph_core::extremes::{nan_max, nan_min};
     use sph_core::motion::RigidState;
-    use sph_core::world::archetype;
 
-    /// The fluid's columns as plain vectors.
+    /// The fluid's column `T` as a plain vector.
     fn fluid<T: hecs::Component + Copy>(sim: &Sim) -> Vec<T> {
-        let a = archetype::<Fluid>(&sim.world).unwrap();
-        column::<T>(a).unwrap().iter().copied().collect()
+        crate::testing::fluid_column(sim, |x: &T| *x)
     }
 
     /// Every diagnostic at once, each against its definition in `Params`, summed
