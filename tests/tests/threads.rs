@@ -55,6 +55,14 @@ shipped! {
         ["resolution=ParticlesAcross(40)", "end_time=0.6", "pipeline.ghost_walls.slip=NoSlip"];
     sloshing_dfsph_no_slip_is_deterministic: "sloshing_dfsph.ron",
         ["resolution=ParticlesAcross(60)", "end_time=0.6", "tank.motion.ramp=0.1", "pipeline.ghost_walls.slip=NoSlip"];
+    // Each pair once for both particles (the scalar path's default): the phases of
+    // non-overlapping chunks add the shares in an order the thread count cannot change.
+    dam_break_pairs_once_is_deterministic: "dam_break.ron",
+        ["resolution=ParticlesAcross(40)", "end_time=0.3", "pipeline.forces.pairs=Once"];
+    dam_break_paper_pairs_once_is_deterministic: "dam_break_paper.ron",
+        ["resolution=ParticlesAcross(40)", "end_time=0.3", "pipeline.forces.pairs=Once"];
+    sloshing_pairs_once_is_deterministic: "sloshing.ron",
+        ["resolution=ParticlesAcross(60)", "end_time=0.4", "tank.motion.ramp=0.1", "pipeline.forces.pairs=Once"];
     dam_break_no_slip_is_deterministic: "dam_break.ron",
         ["resolution=ParticlesAcross(40)", "end_time=0.3", "pipeline.ghost_walls.slip=NoSlip"];
     // Fixed wall particles with the extrapolated pressure (its sums run on one thread

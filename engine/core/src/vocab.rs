@@ -183,6 +183,11 @@ pub struct Neighbours {
     pub blocks: Vec<NeighbourBlock>,
     /// The cell grid, for point queries (sensors, gauges).
     pub grid: CellGrid,
+    /// Each particle's fluid neighbours are in ascending order (before its ghosts, as
+    /// always), so those of higher index are a tail ([`Neighbours::parts`]): the pair
+    /// stages then compute each fluid pair once, for both particles. Set by the grid
+    /// stage at each build.
+    pub fluid_ascending: bool,
 }
 
 /// Whether the lists are rebuilt this step, when decided before the grid stage runs.
@@ -239,6 +244,23 @@ impl Neighbours {
         let b = &self.blocks[i >> BLOCK_BITS];
         let k = i & (BLOCK - 1);
         &b.list[b.offsets[k] as usize..b.offsets[k + 1] as usize]
+    }
+
+    /// Fluid particle `i`'s list in three parts: its fluid neighbours of lower index,
+    /// those of higher index, and its ghosts (which follow the fluid ones). The first
+    /// two are the fluid neighbours below and above `i` only when
+    /// [`Neighbours::fluid_ascending`].
+    #[inline(always)]
+    pub fn parts(&self, i: usize) -> [&[u32]; 3] {
+        let list = self.of(i);
+        let n = self.n_fluid as u64;
+        let fluid = match list.last() {
+            Some(&j) if u64::from(j) >= n => list.partition_point(|&j| u64::from(j) < n),
+            _ => list.len(),
+        };
+        let (fluid, ghosts) = list.split_at(fluid);
+        let (lower, upper) = fluid.split_at(fluid.partition_point(|&j| (j as usize) < i));
+        [lower, upper, ghosts]
     }
 
     /// Checks that a buffer of `len` particles (joint numbering) holds every index in

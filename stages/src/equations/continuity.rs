@@ -29,7 +29,7 @@ pub fn register(registry: &mut StageRegistry) {
                     continuity: Some(continuity::Continuity),
                     ..RateTerms::default()
                 },
-                unused: Vec::new(),
+                scratch: Default::default(),
             })
         },
     );
@@ -37,7 +37,7 @@ pub fn register(registry: &mut StageRegistry) {
 
 pub struct ContinuityStage {
     terms: RateTerms,
-    unused: Vec<rates::Power>,
+    scratch: rates::Scratch,
 }
 
 impl Stage for ContinuityStage {
@@ -59,8 +59,9 @@ impl Stage for ContinuityStage {
             power: false,
             wall: false,
             counts: false,
+            once: crate::forces::Pairs::Auto.once(),
         };
-        rates::run(sim, &self.terms, out, &mut self.unused, None).map(|_| ())
+        rates::run(sim, &self.terms, out, &mut self.scratch, None).map(|_| ())
     }
 
     fn access(&self) -> Access {

@@ -32,6 +32,32 @@ pub struct Params {
     /// plugin registered, in the order written. Default `[PressureGradient(),
     /// ArtificialViscosity()]` (alpha 0.03, beta 0).
     pub terms: Vec<TermSpec>,
+    /// How each fluid pair is computed: `Auto` (default) once for both particles on
+    /// the scalar path and from each side on the SIMD paths (where each side is
+    /// faster: docs/performance.md, "Each pair once"); `Once` or `Twice` to choose.
+    pub pairs: Pairs,
+}
+
+/// How a pass computes each fluid pair ([`Params::pairs`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, serde::Deserialize)]
+pub enum Pairs {
+    #[default]
+    Auto,
+    /// Once, for both particles, each particle summing its neighbours of higher index.
+    Once,
+    /// From each side: each particle sums its whole list.
+    Twice,
+}
+
+impl Pairs {
+    /// Whether the pass computes each pair once on the instruction set it runs.
+    pub(crate) fn once(self) -> bool {
+        match self {
+            Pairs::Auto => sph_core::pair::Isa::detect() == sph_core::pair::Isa::SCALAR,
+            Pairs::Once => true,
+            Pairs::Twice => false,
+        }
+    }
 }
 
 impl Default for Params {
@@ -41,15 +67,16 @@ impl Default for Params {
                 TermSpec::PressureGradient(pressure_gradient::Params::default()),
                 TermSpec::ArtificialViscosity(artificial_viscosity::Params::default()),
             ],
+            pairs: Pairs::Auto,
         }
     }
 }
 
-/// Reads [`Params`] with the terms plugins registered: `(terms: [...])`, every field
-/// optional, none other accepted.
+/// Reads [`Params`] with the terms plugins registered: `(terms: [...], pairs: ...)`,
+/// every field optional, none other accepted.
 struct ParamsSeed<'a>(&'a TermRegistry);
 
-const FIELDS: &[&str] = &["terms"];
+const FIELDS: &[&str] = &["terms", "pairs"];
 
 impl<'de> DeserializeSeed<'de> for ParamsSeed<'_> {
     type Value = Params;
@@ -64,15 +91,21 @@ impl<'de> Visitor<'de> for ParamsSeed<'_> {
         f.write_str("Forces' parameters, (terms: [...])")
     }
     fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Params, A::Error> {
-        let mut terms = None;
+        let (mut terms, mut pairs) = (None, None);
         while let Some(key) = map.next_key_seed(Identifier("a field name"))? {
             match key.as_str() {
                 "terms" if terms.is_some() => return Err(de::Error::duplicate_field("terms")),
                 "terms" => terms = Some(map.next_value_seed(term_list_seed(self.0))?),
+                "pairs" if pairs.is_some() => return Err(de::Error::duplicate_field("pairs")),
+                "pairs" => pairs = Some(map.next_value()?),
                 other => return Err(de::Error::unknown_field(other, FIELDS)),
             }
         }
-        Ok(terms.map_or_else(Params::default, |terms| Params { terms }))
+        let default = Params::default();
+        Ok(Params {
+            terms: terms.unwrap_or(default.terms),
+            pairs: pairs.unwrap_or(default.pairs),
+        })
     }
 }
 
@@ -88,7 +121,7 @@ pub fn register(registry: &mut StageRegistry) {
                 terms: RateTerms::default(),
                 plugins: Vec::new(),
                 pre_passes: Vec::new(),
-                chunk_power: Vec::new(),
+                scratch: Default::default(),
                 wall_shear: false,
                 counts: false,
             })
@@ -105,7 +138,7 @@ pub struct Forces {
     /// list order.
     pre_passes: Vec<PrePass>,
     /// The energy rates of each chunk of particles, kept between steps.
-    chunk_power: Vec<rates::Power>,
+    scratch: rates::Scratch,
     /// The viscous terms read the ghosts' no-slip velocities (`NoSlipVelocity`).
     wall_shear: bool,
     /// The fluid has a `NeighbourCount` column, which this pass fills in while the
@@ -186,6 +219,7 @@ impl Stage for Forces {
                     .resources
                     .get::<Neighbours>()
                     .is_some_and(|nb| nb.skin > 0.0),
+            once: self.params.pairs.once(),
         };
         for pass in &self.pre_passes {
             pass(sim)?;
@@ -196,13 +230,13 @@ impl Stage for Forces {
             .get_mut::<KernelSums>()
             .map(|s| std::mem::take(&mut s.0));
         let power = match self.plugins.is_empty() {
-            true => rates::run(sim, &self.terms, out, &mut self.chunk_power, sums.as_mut()),
+            true => rates::run(sim, &self.terms, out, &mut self.scratch, sums.as_mut()),
             false => {
                 let terms = WithPlugins {
                     base: self.terms,
                     plugins: &self.plugins,
                 };
-                rates::run_set_with(sim, terms, out, &mut self.chunk_power, sums.as_mut())
+                rates::run_set_with(sim, terms, out, &mut self.scratch, sums.as_mut())
             }
         };
         if let (Some(sums), Some(kept)) = (sums, sim.resources.get_mut::<KernelSums>()) {

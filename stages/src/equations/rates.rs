@@ -4,12 +4,16 @@
 
 use crate::terms::{Fixed, RateTerms, TermBit};
 use crate::wall_work;
+use glam::DVec2;
 use rayon::prelude::*;
 use sph_core::components::{
     Acceleration, Density, DensityRate, Mass, NeighbourCount, Position, Pressure, Velocity,
 };
 use sph_core::contract::Access;
-use sph_core::pair::{with_records, Counted, EquationsOfMotion, Field, Fields, Pass, RateTerm};
+use sph_core::pair::{
+    with_records, Counted, EquationsOfMotion, Field, Fields, PairTerm, Pass, RateSums, RateTerm,
+    Shares, SHARE, SHARE_AX, SHARE_AY, SHARE_DRHO,
+};
 use sph_core::sim::Sim;
 use sph_core::stage::StepError;
 use sph_core::vocab::Neighbours;
@@ -47,6 +51,9 @@ pub(crate) struct Outputs {
     /// Each particle's neighbours within the support into `NeighbourCount`, counted in
     /// the same loop (lists with a skin hold more).
     pub counts: bool,
+    /// Each fluid pair computed once for both particles, where the terms allow it
+    /// (`forces::Pairs`).
+    pub once: bool,
 }
 
 /// The energy rates of a pass [W per metre of depth].
@@ -62,7 +69,7 @@ pub(crate) struct Power {
 }
 
 /// Sums `terms` for every fluid particle and writes `out`; returns the energy rates
-/// when asked (else 0). `chunk_power` keeps one partial sum per chunk of particles
+/// when asked (else 0). `scratch.chunk_power` keeps one partial sum per chunk of particles
 /// between steps; the chunks are added in order, so the totals are the same for any
 /// thread count.
 ///
@@ -73,7 +80,7 @@ pub(crate) fn run(
     sim: &mut Sim,
     terms: &RateTerms,
     out: Outputs,
-    chunk_power: &mut Vec<Power>,
+    scratch: &mut Scratch,
     kernel_sums: Option<&mut Vec<f64>>,
 ) -> Result<Power, StepError> {
     use crate::terms::set_of as bits;
@@ -100,37 +107,37 @@ pub(crate) fn run(
     const RIEMANN: u16 = bits(&[RiemannPressure, Continuity, RiemannDiffusion]);
     if let Some(sums) = kernel_sums {
         return match Fixed::<RIEMANN>::of(terms) {
-            Some(set) if !generic_only() => run_set_with(sim, set, out, chunk_power, Some(sums)),
-            _ => run_set_with(sim, *terms, out, chunk_power, Some(sums)),
+            Some(set) if !generic_only() => run_set_with(sim, set, out, scratch, Some(sums)),
+            _ => run_set_with(sim, *terms, out, scratch, Some(sums)),
         };
     }
     let none = &mut Vec::new();
     if generic_only() {
-        run_set::<_, false>(sim, *terms, out, chunk_power, none)
+        run_set::<_, false>(sim, *terms, out, scratch, none)
     } else if let Some(set) = Fixed::<PG_AV_AP_C>::of(terms) {
-        run_set::<_, false>(sim, set, out, chunk_power, none)
+        run_set::<_, false>(sim, set, out, scratch, none)
     } else if let Some(set) = Fixed::<RIEMANN>::of(terms) {
-        run_set::<_, false>(sim, set, out, chunk_power, none)
+        run_set::<_, false>(sim, set, out, scratch, none)
     } else if let Some(set) = Fixed::<PG_AV_AP_C_F>::of(terms) {
-        run_set::<_, false>(sim, set, out, chunk_power, none)
+        run_set::<_, false>(sim, set, out, scratch, none)
     } else if let Some(set) = Fixed::<PG_AV_C_F>::of(terms) {
-        run_set::<_, false>(sim, set, out, chunk_power, none)
+        run_set::<_, false>(sim, set, out, scratch, none)
     } else if let Some(set) = Fixed::<PG_AV_AP_C_MC>::of(terms) {
-        run_set::<_, false>(sim, set, out, chunk_power, none)
+        run_set::<_, false>(sim, set, out, scratch, none)
     } else if let Some(set) = Fixed::<PG_AV_C_MC>::of(terms) {
-        run_set::<_, false>(sim, set, out, chunk_power, none)
+        run_set::<_, false>(sim, set, out, scratch, none)
     } else if let Some(set) = Fixed::<PG_AV_AP_C_D>::of(terms) {
-        run_set::<_, false>(sim, set, out, chunk_power, none)
+        run_set::<_, false>(sim, set, out, scratch, none)
     } else if let Some(set) = Fixed::<PG_AV_C_D>::of(terms) {
-        run_set::<_, false>(sim, set, out, chunk_power, none)
+        run_set::<_, false>(sim, set, out, scratch, none)
     } else if let Some(set) = Fixed::<PG_AV_C>::of(terms) {
-        run_set::<_, false>(sim, set, out, chunk_power, none)
+        run_set::<_, false>(sim, set, out, scratch, none)
     } else if let Some(set) = Fixed::<PG_AV>::of(terms) {
-        run_set::<_, false>(sim, set, out, chunk_power, none)
+        run_set::<_, false>(sim, set, out, scratch, none)
     } else if let Some(set) = Fixed::<C>::of(terms) {
-        run_set::<_, false>(sim, set, out, chunk_power, none)
+        run_set::<_, false>(sim, set, out, scratch, none)
     } else {
-        run_set::<_, false>(sim, *terms, out, chunk_power, none)
+        run_set::<_, false>(sim, *terms, out, scratch, none)
     }
 }
 
@@ -148,12 +155,12 @@ pub(crate) fn run_set_with<R: RateTerm + Copy>(
     sim: &mut Sim,
     terms: R,
     out: Outputs,
-    chunk_power: &mut Vec<Power>,
+    scratch: &mut Scratch,
     kernel_sums: Option<&mut Vec<f64>>,
 ) -> Result<Power, StepError> {
     match kernel_sums {
-        Some(sums) => run_set::<_, true>(sim, terms, out, chunk_power, sums),
-        None => run_set::<_, false>(sim, terms, out, chunk_power, &mut Vec::new()),
+        Some(sums) => run_set::<_, true>(sim, terms, out, scratch, sums),
+        None => run_set::<_, false>(sim, terms, out, scratch, &mut Vec::new()),
     }
 }
 
@@ -163,7 +170,7 @@ fn run_set<R: RateTerm + Copy, const KERNEL_SUM: bool>(
     sim: &mut Sim,
     terms: R,
     out: Outputs,
-    chunk_power: &mut Vec<Power>,
+    scratch: &mut Scratch,
     kernel_sums: &mut Vec<f64>,
 ) -> Result<Power, StepError> {
     let power = with_records(sim, terms.reads(), |sim, particles, records| {
@@ -215,8 +222,8 @@ fn run_set<R: RateTerm + Copy, const KERNEL_SUM: bool>(
         let counts: &mut [NeighbourCount] = counts.as_deref_mut().unwrap_or(&mut []);
         let state = state.as_ref().map(|(v, rho, m)| (&v[..], &rho[..], &m[..]));
         let chunks = n.div_ceil(CHUNK);
-        chunk_power.clear();
-        chunk_power.resize(
+        scratch.chunk_power.clear();
+        scratch.chunk_power.resize(
             if out.power || out.wall { chunks } else { 0 },
             Power::default(),
         );
@@ -225,68 +232,222 @@ fn run_set<R: RateTerm + Copy, const KERNEL_SUM: bool>(
         with_kernel!(c.kernel, c.h, |k| {
             let pass =
                 Pass::new(&eom, k, records).map_err(|e| StepError::Internal(e.to_string()))?;
-            optional_pieces(acc, n, CHUNK)
-                .zip(optional_pieces(rate, n, CHUNK))
-                .zip(optional_pieces(counts, n, CHUNK))
-                .zip(optional_pieces(&mut kernel_sums[..], n, CHUNK))
-                .zip(optional_pieces(&mut chunk_power[..], chunks, 1))
-                .enumerate()
-                .for_each(
-                    |(c, ((((mut acc, mut rate), mut counts), mut sums), power))| {
-                        let mut sum = Power::default();
-                        for k in 0..(n - c * CHUNK).min(CHUNK) {
-                            let i = c * CHUNK + k;
-                            let list = nb.of(i);
-                            // The ghost neighbours, last in the list, summed apart (for the
-                            // walls' power; always, so that every rate stage adds a
-                            // particle's pairs in the same order).
-                            let ghosts = match list.last() {
-                                Some(&j) if j as usize >= n => {
-                                    list.partition_point(|&j| (j as usize) < n)
+            if <Counted<EquationsOfMotion<R>, KERNEL_SUM> as PairTerm>::SYMMETRIC
+                && out.once
+                && nb.fluid_ascending
+            {
+                let out = Outs { acc, rate, counts };
+                each_pair_once(&pass, nb, out, scratch, g, &eos, state);
+            } else {
+                optional_pieces(acc, n, CHUNK)
+                    .zip(optional_pieces(rate, n, CHUNK))
+                    .zip(optional_pieces(counts, n, CHUNK))
+                    .zip(optional_pieces(&mut kernel_sums[..], n, CHUNK))
+                    .zip(optional_pieces(&mut scratch.chunk_power[..], chunks, 1))
+                    .enumerate()
+                    .for_each(
+                        |(c, ((((mut acc, mut rate), mut counts), mut sums), power))| {
+                            let mut sum = Power::default();
+                            for k in 0..(n - c * CHUNK).min(CHUNK) {
+                                let i = c * CHUNK + k;
+                                let list = nb.of(i);
+                                // The ghost neighbours, last in the list, summed apart (for the
+                                // walls' power; always, so that every rate stage adds a
+                                // particle's pairs in the same order).
+                                let ghosts = match list.last() {
+                                    Some(&j) if j as usize >= n => {
+                                        list.partition_point(|&j| (j as usize) < n)
+                                    }
+                                    _ => list.len(),
+                                };
+                                let (s, count, kernel) = if ghosts == list.len() {
+                                    pass.sum(i, list)
+                                } else {
+                                    let (f, cf, kf) = pass.sum(i, &list[..ghosts]);
+                                    let (w, cw, kw) = pass.sum(i, &list[ghosts..]);
+                                    if let Some((v, rho, m)) = state {
+                                        sum.wall += wall_work::particle_power(
+                                            &eos, m[i].0, v[i].0, rho[i].0, &w,
+                                        );
+                                    }
+                                    (f + w, cf + cw, kf + kw)
+                                };
+                                if let Some(k_sum) = sums.as_deref_mut() {
+                                    k_sum[k] = kernel;
                                 }
-                                _ => list.len(),
-                            };
-                            let (s, count, kernel) = if ghosts == list.len() {
-                                pass.sum(i, list)
-                            } else {
-                                let (f, cf, kf) = pass.sum(i, &list[..ghosts]);
-                                let (w, cw, kw) = pass.sum(i, &list[ghosts..]);
-                                if let Some((v, rho, m)) = state {
-                                    sum.wall += wall_work::particle_power(
-                                        &eos, m[i].0, v[i].0, rho[i].0, &w,
-                                    );
+                                if let Some(a) = acc.as_deref_mut() {
+                                    a[k].0 = s.acc + g;
                                 }
-                                (f + w, cf + cw, kf + kw)
-                            };
-                            if let Some(k_sum) = sums.as_deref_mut() {
-                                k_sum[k] = kernel;
+                                if let Some(r) = rate.as_deref_mut() {
+                                    r[k].0 = s.drho;
+                                }
+                                if let Some(n) = counts.as_deref_mut() {
+                                    n[k].0 = count;
+                                }
+                                sum.viscous += s.power;
+                                sum.diffusion += s.diffusion;
                             }
-                            if let Some(a) = acc.as_deref_mut() {
-                                a[k].0 = s.acc + g;
+                            if let Some(p) = power {
+                                p[0] = sum;
                             }
-                            if let Some(r) = rate.as_deref_mut() {
-                                r[k].0 = s.drho;
-                            }
-                            if let Some(n) = counts.as_deref_mut() {
-                                n[k].0 = count;
-                            }
-                            sum.viscous += s.power;
-                            sum.diffusion += s.diffusion;
-                        }
-                        if let Some(p) = power {
-                            p[0] = sum;
-                        }
-                    },
-                );
+                        },
+                    );
+            }
             Ok::<(), StepError>(())
         })?;
-        Ok(chunk_power.iter().fold(Power::default(), |a, p| Power {
-            viscous: a.viscous + p.viscous,
-            diffusion: a.diffusion + p.diffusion,
-            wall: a.wall + p.wall,
-        }))
+        Ok(scratch
+            .chunk_power
+            .iter()
+            .fold(Power::default(), |a, p| Power {
+                viscous: a.viscous + p.viscous,
+                diffusion: a.diffusion + p.diffusion,
+                wall: a.wall + p.wall,
+            }))
     })?;
     Ok(power.unwrap_or_default())
+}
+
+/// The columns a pass writes, each empty when not wanted.
+struct Outs<'a> {
+    acc: &'a mut [Acceleration],
+    rate: &'a mut [DensityRate],
+    counts: &'a mut [NeighbourCount],
+}
+
+/// Splits `records` into the ascending, disjoint `ranges` of fluid indices.
+fn carve<'a>(
+    records: &'a mut [[f64; SHARE]],
+    ranges: &[(usize, usize)],
+) -> Vec<&'a mut [[f64; SHARE]]> {
+    let (mut rest, mut at) = (records, 0);
+    ranges
+        .iter()
+        .map(|&(lo, hi)| {
+            let (_, tail) = std::mem::take(&mut rest).split_at_mut(lo - at);
+            let (window, tail) = tail.split_at_mut(hi - lo);
+            (rest, at) = (tail, hi);
+            window
+        })
+        .collect()
+}
+
+/// The pass with each fluid pair computed once ([`Pass::sum_both`]): particle i sums
+/// its fluid neighbours of higher index and adds each one's share to that
+/// particle's record of sums (`scratch.shares`: dv/dt, d rho/dt and the count), then
+/// its ghosts (whose sums give the walls' power, as in the pass over whole lists).
+///
+/// Results are the same for any thread count: chunks of [`CHUNK`] particles run in
+/// phases, and in each phase only chunks whose windows (their particles and the
+/// highest neighbour they write) do not overlap run in parallel; a particle's record
+/// is the sum of what each phase adds to it, in phase and then chunk order, each
+/// chunk adding in particle and list order. The phase count is fixed by the lists
+/// alone: chunk c writes below the start of chunk c + phases.
+fn each_pair_once<T, K>(
+    pass: &Pass<'_, T, K>,
+    nb: &Neighbours,
+    out: Outs<'_>,
+    scratch: &mut Scratch,
+    g: DVec2,
+    eos: &sph_core::sim::Tait,
+    state: Option<(&[Velocity], &[Density], &[Mass])>,
+) where
+    T: PairTerm<Out = (RateSums, u32, f64)>,
+    K: sph_core::kernel::Kernel,
+{
+    let n = nb.n_fluid;
+    let chunks = n.div_ceil(CHUNK);
+    let Scratch {
+        chunk_power,
+        shares,
+        reach,
+        done,
+    } = scratch;
+    shares.clear();
+    shares.resize(n, [0.0; SHARE]);
+    // One past the highest fluid particle each chunk writes: the upper neighbours are
+    // the tail of each list's ascending fluid part.
+    (0..chunks)
+        .into_par_iter()
+        .map(|c| {
+            let range = c * CHUNK..((c + 1) * CHUNK).min(n);
+            range.clone().fold(range.end, |top, i| {
+                let [_, upper, _] = nb.parts(i);
+                upper.last().map_or(top, |&j| top.max(j as usize + 1))
+            })
+        })
+        .collect_into_vec(reach);
+    let phases = (0..chunks)
+        .map(|c| reach[c].div_ceil(CHUNK) - c)
+        .max()
+        .unwrap_or(1);
+    for phase in 0..phases {
+        let ids: Vec<usize> = (phase..chunks).step_by(phases).collect();
+        let ranges: Vec<(usize, usize)> = ids.iter().map(|&c| (c * CHUNK, reach[c])).collect();
+        ids.par_iter()
+            .zip(carve(shares, &ranges))
+            .map(|(&c, records)| {
+                let mut window = Shares {
+                    start: c * CHUNK,
+                    records,
+                };
+                let mut sum = Power::default();
+                for i in c * CHUNK..((c + 1) * CHUNK).min(n) {
+                    let [_, upper, ghosts] = nb.parts(i);
+                    let (mut s, mut count, _) = pass.sum_both(i, upper, &mut window);
+                    if !ghosts.is_empty() {
+                        let (w, cw, _) = pass.sum(i, ghosts);
+                        if let Some((v, rho, m)) = state {
+                            sum.wall +=
+                                wall_work::particle_power(eos, m[i].0, v[i].0, rho[i].0, &w);
+                        }
+                        (s, count) = (s + w, count + cw);
+                    }
+                    let mut own = [0.0; SHARE];
+                    own[SHARE_AX] = s.acc.x;
+                    own[SHARE_AY] = s.acc.y;
+                    own[SHARE_DRHO] = s.drho;
+                    own[COUNT] = f64::from(count);
+                    window.add(i, own);
+                    sum.viscous += s.power;
+                    sum.diffusion += s.diffusion;
+                }
+                (c, sum)
+            })
+            .collect_into_vec(done);
+        for &(c, p) in done.iter() {
+            if let Some(slot) = chunk_power.get_mut(c) {
+                *slot = p;
+            }
+        }
+    }
+    // Gravity last, as in the pass over whole lists.
+    let records = &shares[..];
+    out.acc
+        .par_iter_mut()
+        .zip(records)
+        .for_each(|(a, r)| a.0 = DVec2::new(r[SHARE_AX], r[SHARE_AY]) + g);
+    out.rate
+        .par_iter_mut()
+        .zip(records)
+        .for_each(|(d, r)| d.0 = r[SHARE_DRHO]);
+    out.counts
+        .par_iter_mut()
+        .zip(records)
+        .for_each(|(c, r)| c.0 = r[COUNT] as u32);
+}
+
+/// The slot of a particle's record that counts its neighbours within the support.
+const COUNT: usize = Counted::<(), false>::COUNT_SLOT;
+
+/// What the rate passes keep from step to step: each chunk's energy rates, and the
+/// per-particle records of sums of the pass that computes each pair once.
+#[derive(Default)]
+pub(crate) struct Scratch {
+    chunk_power: Vec<Power>,
+    shares: Vec<[f64; SHARE]>,
+    /// One past the highest particle each chunk writes.
+    reach: Vec<usize>,
+    done: Vec<(usize, Power)>,
 }
 
 /// Pieces of `per` elements of an optional output of `len` elements: the slice's own

@@ -127,18 +127,28 @@ fn rebuild(grid: &mut CellGrid, positions: Joined<Position>) {
         });
 }
 
-/// Moves the ghosts (indices from `n_fluid` on) of a neighbour list after its fluid
-/// particles, each part in its order, so a pass can sum the ghost neighbours apart
-/// (the walls' work) without a second loop.
+/// Puts a neighbour list's fluid particles in ascending order and its ghosts (indices
+/// from `n_fluid` on) after them, in their order: a pass sums the ghost neighbours
+/// apart (the walls' work) without a second loop, and finds the fluid neighbours of
+/// higher index, whose pairs it computes once for both particles, by a binary search
+/// ([`Neighbours::upper`]).
 fn ghosts_last(list: &mut [u32], n_fluid: u32) {
+    let fluid = ghosts_after(list, n_fluid);
+    list[..fluid].sort_unstable();
+}
+
+/// Moves the ghosts after the fluid particles, each part in its order; returns the
+/// fluid count.
+fn ghosts_after(list: &mut [u32], n_fluid: u32) -> usize {
     let mut ghosts = [0u32; 64];
     if list.iter().filter(|&&j| j >= n_fluid).count() > ghosts.len() {
         // More ghosts than the buffer holds (no kernel support does at the shipped
         // h/ds): on the heap.
         let (mut fluid, ghosts): (Vec<u32>, Vec<u32>) = list.iter().partition(|&&j| j < n_fluid);
+        let n = fluid.len();
         fluid.extend(ghosts);
         list.copy_from_slice(&fluid);
-        return;
+        return n;
     }
     let (mut fluid, mut g) = (0, 0);
     for k in 0..list.len() {
@@ -152,6 +162,7 @@ fn ghosts_last(list: &mut [u32], n_fluid: u32) {
         }
     }
     list[fluid..].copy_from_slice(&ghosts[..g]);
+    fluid
 }
 
 impl Stage for NeighbourGrid {
@@ -381,6 +392,7 @@ impl NeighbourGrid {
         nb.age = 0;
         nb.n_fluid = fpos.len();
         nb.n_ghost = gpos.len();
+        nb.fluid_ascending = true;
         let positions = Joined::new(fpos, gpos);
         rebuild(&mut nb.grid, positions);
         let reach = nb.reach();
@@ -420,15 +432,16 @@ mod tests {
     use super::ghosts_last;
 
     #[test]
-    fn ghosts_go_last_in_their_order() {
+    fn fluid_ascend_and_ghosts_go_last_in_their_order() {
         let mut list = [7, 12, 3, 10, 1, 11];
         ghosts_last(&mut list, 10);
-        assert_eq!(list, [7, 3, 1, 12, 10, 11]);
+        assert_eq!(list, [1, 3, 7, 12, 10, 11]);
         // More ghosts than the stack buffer.
         let mut long: Vec<u32> = (0..200)
-            .map(|k| if k % 3 == 0 { 1000 + k } else { k })
+            .map(|k| if k % 3 == 0 { 1000 + k } else { 200 - k })
             .collect();
         let (mut fluid, ghosts): (Vec<u32>, Vec<u32>) = long.iter().partition(|&&j| j < 1000);
+        fluid.sort_unstable();
         fluid.extend(ghosts);
         ghosts_last(&mut long, 1000);
         assert_eq!(long, fluid);

@@ -68,6 +68,8 @@ impl RateTerm for ArtificialPressure {
         <Self as Term>::READS
     }
     const USES_COEF: bool = true;
+    /// Only the symmetric coefficient C_ij.
+    const SYMMETRIC: bool = true;
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
         let (c, zero) = (L::splat, L::zero());

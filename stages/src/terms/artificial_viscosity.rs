@@ -76,6 +76,12 @@ impl RateTerm for ArtificialViscosity {
     const USES_COEF: bool = true;
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
+        self.pair_both(me, p, r, &mut Rates::zero())
+    }
+    /// Pi_ij is symmetric; j's dissipation rate m_i Pi_ij v_ij . grad_i W_ij.
+    const SYMMETRIC: bool = true;
+    #[inline(always)]
+    fn pair_both<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>, rj: &mut Rates<L>) {
         let c = L::splat;
         let (wx, wy) = viscous_v_ij(p, me, self.shear);
         let vx = wx * p.dx + wy * p.dy;
@@ -94,6 +100,8 @@ impl RateTerm for ArtificialViscosity {
         let visc = visc.keep(vx.lt(L::zero()));
         r.coef = r.coef + visc;
         let vij_grad = wx * p.gx + wy * p.gy;
-        r.power = r.power + p.j(Field::Mass) * visc * vij_grad;
+        let dissipation = visc * vij_grad;
+        r.power = r.power + p.j(Field::Mass) * dissipation;
+        rj.power = rj.power + me.lanes::<L>(Field::Mass) * dissipation;
     }
 }

@@ -28,7 +28,15 @@ impl RateTerm for Continuity {
     }
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
+        self.pair_both(me, p, r, &mut Rates::zero())
+    }
+    /// j's share m_i v_ji . grad_j W_ji = m_i v_ij . grad_i W_ij.
+    const SYMMETRIC: bool = true;
+    #[inline(always)]
+    fn pair_both<L: Lane>(&self, me: &Me, p: &Pair<L>, ri: &mut Rates<L>, rj: &mut Rates<L>) {
         let (wx, wy) = p.v_ij(me);
-        r.drho = r.drho + p.j(Field::Mass) * (wx * p.gx + wy * p.gy);
+        let v_grad = wx * p.gx + wy * p.gy;
+        ri.drho = ri.drho + p.j(Field::Mass) * v_grad;
+        rj.drho = rj.drho + me.lanes::<L>(Field::Mass) * v_grad;
     }
 }

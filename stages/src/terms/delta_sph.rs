@@ -46,12 +46,20 @@ impl RateTerm for DeltaSph {
     }
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
+        self.pair_both(me, p, r, &mut Rates::zero())
+    }
+    /// The density difference is antisymmetric, d_ji = -d_ij.
+    const SYMMETRIC: bool = true;
+    #[inline(always)]
+    fn pair_both<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>, rj: &mut Rates<L>) {
         // (rho_j - rho_i) - (1/2)(G_i + G_j) . x_ji, with x_ji = -(dx, dy): the flux of
         // 2 d x_ji / r^2 . grad W is then psi_ij . grad W.
         let half = L::splat(0.5);
         let gx = me.lanes::<L>(DensityGradient::X) + p.j(DensityGradient::X);
         let gy = me.lanes::<L>(DensityGradient::Y) + p.j(DensityGradient::Y);
         let d = p.j(Field::Rho) - me.lanes::<L>(Field::Rho) + half * (gx * p.dx + gy * p.dy);
-        r.diffusion = r.diffusion + self.scale.flux(p, d);
+        let (fi, fj) = self.scale.fluxes(me, p, d, L::zero() - d);
+        r.diffusion = r.diffusion + fi;
+        rj.diffusion = rj.diffusion + fj;
     }
 }

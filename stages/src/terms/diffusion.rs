@@ -7,7 +7,7 @@
 //! sums run over fluid and ghost particles, like the continuity equation's.
 
 use serde::{Deserialize, Serialize};
-use sph_core::pair::{Field, Lane, Pair};
+use sph_core::pair::{Field, Lane, Me, Pair};
 use sph_core::sim::Constants;
 
 /// The parameters of every density-diffusion term.
@@ -58,17 +58,21 @@ impl Scale {
         }
     }
 
-    /// delta h c_0 * 2 d_ij (x_ji . grad_i W_ij) / (r_ij^2 + eta^2) * V_j: one pair's
-    /// share of D_i for a density difference d_ij (rho_j - rho_i, less what a scheme
-    /// removes from it). x_ji . grad_i W_ij = -x_ij . grad_i W_ij >= 0, so the flux
-    /// runs from the denser particle to the lighter.
+    /// One pair's shares of D_i and D_j for the density differences d_ij (rho_j -
+    /// rho_i, less what a scheme removes from it) and d_ji: delta h c_0 * 2 d_ij
+    /// (x_ji . grad_i W_ij) / (r_ij^2 + eta^2) * V_j, and the same with i and j
+    /// exchanged, where x_ij . grad_j W_ji = x_ji . grad_i W_ij. That factor is >= 0,
+    /// so the flux runs from the denser particle to the lighter. One division for
+    /// both (divisions bound the pair loop).
     #[inline(always)]
-    pub fn flux<L: Lane>(&self, p: &Pair<L>, d_ij: L) -> L {
+    pub fn fluxes<L: Lane>(&self, me: &Me, p: &Pair<L>, d_ij: L, d_ji: L) -> (L, L) {
         let c = L::splat;
+        let (rho_i, rho_j) = (me.lanes::<L>(Field::Rho), p.j(Field::Rho));
         let x_grad = L::zero() - (p.dx * p.gx + p.dy * p.gy);
-        // One division, not two (divisions bound the pair loop): the same up to
-        // round-off.
-        c(2.0 * self.coef) * d_ij * x_grad * p.j(Field::Mass)
-            / ((p.r * p.r + c(self.eta2)) * p.j(Field::Rho))
+        let t = c(2.0 * self.coef) * x_grad / ((p.r * p.r + c(self.eta2)) * rho_i * rho_j);
+        (
+            d_ij * p.j(Field::Mass) * rho_i * t,
+            d_ji * me.lanes::<L>(Field::Mass) * rho_j * t,
+        )
     }
 }

@@ -57,11 +57,23 @@ impl RateTerm for Fourtakas {
     }
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
+        self.pair_both(me, p, r, &mut Rates::zero())
+    }
+    /// j's hydrostatic difference is rho^H at -u (the series is not odd in u).
+    const SYMMETRIC: bool = true;
+    #[inline(always)]
+    fn pair_both<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>, rj: &mut Rates<L>) {
         let c = L::splat;
         // u = rho_0 g . x_ji / B, with x_ji = -(dx, dy).
         let u = L::zero() - (c(self.gx_b) * p.dx + c(self.gy_b) * p.dy);
-        let rho_h = u * (c(self.c1) + u * (c(self.c2) + u * c(self.c3)));
-        let d = p.j(Field::Rho) - me.lanes::<L>(Field::Rho) - rho_h;
-        r.diffusion = r.diffusion + self.scale.flux(p, d);
+        let rho_h = |u: L| u * (c(self.c1) + u * (c(self.c2) + u * c(self.c3)));
+        let rho_ji = p.j(Field::Rho) - me.lanes::<L>(Field::Rho);
+        let (d, d_ji) = (
+            rho_ji - rho_h(u),
+            (L::zero() - rho_ji) - rho_h(L::zero() - u),
+        );
+        let (fi, fj) = self.scale.fluxes(me, p, d, d_ji);
+        r.diffusion = r.diffusion + fi;
+        rj.diffusion = rj.diffusion + fj;
     }
 }

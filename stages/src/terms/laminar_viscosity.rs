@@ -60,6 +60,13 @@ impl RateTerm for LaminarViscosity {
     }
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
+        self.pair_both(me, p, r, &mut Rates::zero())
+    }
+    /// k is symmetric and v_ji = -v_ij: j gets -m_i k v_ij, and the same dissipation
+    /// per unit mass.
+    const SYMMETRIC: bool = true;
+    #[inline(always)]
+    fn pair_both<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>, rj: &mut Rates<L>) {
         let c = L::splat;
         let (wx, wy) = viscous_v_ij(p, me, self.shear);
         let x_grad = p.dx * p.gx + p.dy * p.gy;
@@ -68,6 +75,11 @@ impl RateTerm for LaminarViscosity {
         let mk = p.j(Field::Mass) * k;
         r.ax = r.ax + mk * wx;
         r.ay = r.ay + mk * wy;
-        r.power = r.power - mk * (wx * wx + wy * wy);
+        let w2 = wx * wx + wy * wy;
+        r.power = r.power - mk * w2;
+        let mki = me.lanes::<L>(Field::Mass) * k;
+        rj.ax = rj.ax - mki * wx;
+        rj.ay = rj.ay - mki * wy;
+        rj.power = rj.power - mki * w2;
     }
 }

@@ -287,6 +287,14 @@ macro_rules! rate_terms {
                     self.$module.pair(me, p, r);
                 })*
             }
+            const SYMMETRIC: bool =
+                true $(&& (SET & (1 << TermBit::$ty as u16) == 0 || <$module::$ty as RateTerm>::SYMMETRIC))*;
+            #[inline(always)]
+            fn pair_both<L: Lane>(&self, me: &Me, p: &Pair<L>, ri: &mut Rates<L>, rj: &mut Rates<L>) {
+                $(if SET & (1 << TermBit::$ty as u16) != 0 {
+                    self.$module.pair_both(me, p, ri, rj);
+                })*
+            }
         }
 
         impl RateTerms {
@@ -354,6 +362,11 @@ macro_rules! rate_terms {
             fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
                 $(if let Some(t) = &self.$module { t.pair(me, p, r); })*
             }
+            const SYMMETRIC: bool = true $(&& <$module::$ty as RateTerm>::SYMMETRIC)*;
+            #[inline(always)]
+            fn pair_both<L: Lane>(&self, me: &Me, p: &Pair<L>, ri: &mut Rates<L>, rj: &mut Rates<L>) {
+                $(if let Some(t) = &self.$module { t.pair_both(me, p, ri, rj); })*
+            }
         }
     };
 }
@@ -383,6 +396,8 @@ rate_terms! {
     riemann_diffusion::RiemannDiffusion,
 }
 
+#[cfg(test)]
+mod each_pair_once_tests;
 #[cfg(test)]
 mod generic_tests;
 #[cfg(test)]

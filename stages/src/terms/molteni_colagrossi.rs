@@ -36,7 +36,15 @@ impl RateTerm for MolteniColagrossi {
     }
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
+        self.pair_both(me, p, r, &mut Rates::zero())
+    }
+    /// The density difference is antisymmetric, d_ji = -d_ij.
+    const SYMMETRIC: bool = true;
+    #[inline(always)]
+    fn pair_both<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>, rj: &mut Rates<L>) {
         let d = p.j(Field::Rho) - me.lanes::<L>(Field::Rho);
-        r.diffusion = r.diffusion + self.scale.flux(p, d);
+        let (fi, fj) = self.scale.fluxes(me, p, d, L::zero() - d);
+        r.diffusion = r.diffusion + fi;
+        rj.diffusion = rj.diffusion + fj;
     }
 }

@@ -28,6 +28,8 @@ impl RateTerm for PressureGradient {
         <Self as Term>::READS
     }
     const USES_COEF: bool = true;
+    /// Only the symmetric coefficient C_ij.
+    const SYMMETRIC: bool = true;
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
         r.coef = r.coef + (me.lanes::<L>(Field::PRho2) + p.j(Field::PRho2));

@@ -69,13 +69,21 @@ impl RateTerm for RiemannDiffusion {
     }
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
+        self.pair_both(me, p, r, &mut Rates::zero())
+    }
+    /// dp_ji = -dp_ij and x_ji . grad_j W_ji = x_ij . grad_i W_ij: j's share is
+    /// -rho_j m_i dp_ij x_ij . grad_i W_ij / (rho_i rhobar cbar r), one division for
+    /// both.
+    const SYMMETRIC: bool = true;
+    #[inline(always)]
+    fn pair_both<L: Lane>(&self, me: &Me, p: &Pair<L>, ri: &mut Rates<L>, rj: &mut Rates<L>) {
         let c = L::splat;
         let s = states(me, p);
         // (p_i - p_j) less its hydrostatic part p_i - p_j = -rho_0 g . x_ji = rho_0 g . x_ij.
         let dp = s.p_i - s.p_j - (c(self.rho_gx) * p.dx + c(self.rho_gy) * p.dy);
         let x_grad = p.dx * p.gx + p.dy * p.gy;
-        r.diffusion = r.diffusion
-            + s.rho_i * p.j(Field::Mass) * dp * x_grad
-                / (s.rho_j * s.rhobar * s.cbar * p.r.max(c(self.tiny)));
+        let t = dp * x_grad / (s.rho_i * s.rho_j * s.rhobar * s.cbar * p.r.max(c(self.tiny)));
+        ri.diffusion = ri.diffusion + s.rho_i * s.rho_i * p.j(Field::Mass) * t;
+        rj.diffusion = rj.diffusion - s.rho_j * s.rho_j * me.lanes::<L>(Field::Mass) * t;
     }
 }

@@ -82,6 +82,13 @@ impl RateTerm for RiemannPressure {
     const USES_COEF: bool = true;
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
+        self.pair_both(me, p, r, &mut Rates::zero())
+    }
+    /// The coefficient is symmetric (u_ij, beta and the states' means are); j's
+    /// dissipation rate m_i (...) v_ij . grad_i W_ij.
+    const SYMMETRIC: bool = true;
+    #[inline(always)]
+    fn pair_both<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>, rj: &mut Rates<L>) {
         let c = L::splat;
         let s = states(me, p);
         let (wx, wy) = viscous_v_ij(p, me, self.shear);
@@ -92,6 +99,8 @@ impl RateTerm for RiemannPressure {
         let inv = c(1.0) / (s.rho_i * s.rho_j);
         let dissipation = s.rhobar * beta * u * inv;
         r.coef = r.coef + (s.p_i + s.p_j) * inv + dissipation;
-        r.power = r.power + p.j(Field::Mass) * dissipation * (wx * p.gx + wy * p.gy);
+        let rate = dissipation * (wx * p.gx + wy * p.gy);
+        r.power = r.power + p.j(Field::Mass) * rate;
+        rj.power = rj.power + me.lanes::<L>(Field::Mass) * rate;
     }
 }

@@ -268,6 +268,11 @@ fn fourtakas_takes_the_hydrostatic_difference_to_third_order() {
 /// A jittered 12 x 12 lattice, its bottom row ghosts (of source 0), with random
 /// densities and velocities.
 pub(super) fn jittered_world() -> hecs::World {
+    jittered_world_with(|_| 0.1)
+}
+
+/// [`jittered_world`] with masses `mass(u)` for a random u in [0, 1).
+pub(super) fn jittered_world_with(mass: impl Fn(f64) -> f64) -> hecs::World {
     let mut state = 12345u64;
     let mut next = move || {
         state = state
@@ -285,7 +290,7 @@ pub(super) fn jittered_world() -> hecs::World {
                 Position(x),
                 Velocity(DVec2::new(next() - 0.5, next() - 0.5)),
                 Density(rho),
-                Mass(0.1),
+                Mass(mass(next())),
                 Pressure(eos.pressure(rho)),
             );
             match b {

@@ -146,6 +146,19 @@ pub(crate) mod sealed {
         /// A plugin kernel's shape function at `q`, through the function compiled
         /// for this lane type ([`crate::kernel::PluginKernel`]).
         fn shape(f: &crate::pair::ShapeFn, q: Self) -> Self;
+        /// Adds lane l of each slot of `share` to neighbour `js[l]`'s record in
+        /// `shares`, for each neighbour of the group (1 to `WIDTH`).
+        ///
+        /// # Panics
+        /// If a neighbour is outside the window of `shares`.
+        ///
+        /// # Safety
+        /// The lane type's instructions exist on this processor.
+        unsafe fn scatter(
+            js: &[u32],
+            share: &crate::pair::Share<Self>,
+            shares: &mut crate::pair::Shares,
+        );
         /// Record offsets of a group of neighbours, with the lanes in use.
         type Index: Copy;
         /// The group `js` (1 to `WIDTH` joint indices) of a buffer of `len` records of
@@ -187,6 +200,14 @@ pub(crate) mod sealed {
     }
 
     impl Gather for f64 {
+        #[inline(always)]
+        unsafe fn scatter(
+            js: &[u32],
+            share: &crate::pair::Share<f64>,
+            shares: &mut crate::pair::Shares,
+        ) {
+            shares.add(js[0] as usize, *share);
+        }
         #[inline(always)]
         fn plugin_pair(
             t: &crate::pair::PluginTerm,

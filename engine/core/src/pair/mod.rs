@@ -44,7 +44,7 @@ pub use columns::{ColumnError, ColumnKey, Columns, Scope};
 pub use lane::{whole_pow, Lane};
 pub(crate) use plugin::{shape, shape_fn};
 pub use plugin::{NoTerms, PluginTerm, ShapeFn, WithPlugins};
-pub use rates::{EquationsOfMotion, RateSums, RateTerm, Rates};
+pub use rates::{EquationsOfMotion, RateSums, RateTerm, Rates, SHARE_AX, SHARE_AY, SHARE_DRHO};
 pub use record::{Field, Fields, Records};
 
 use crate::kernel::Kernel;
@@ -281,6 +281,55 @@ pub trait PairTerm: Sync + Clone {
     /// The result from the accumulated lanes (add them with [`Lane::sum`]) and i's own
     /// fields (for a self contribution).
     fn finish<L: Lane>(&self, me: &Me, acc: Self::Acc<L>) -> Self::Out;
+
+    /// Whether [`PairTerm::pair_both`] gives neighbour j's share of each pair from the
+    /// same evaluation, so that a pass can compute each pair once ([`Pass::sum_both`]).
+    const SYMMETRIC: bool = false;
+    /// Adds one group of neighbours to i's accumulator, as [`PairTerm::pair`], and
+    /// returns each neighbour j's share of the same pairs: the values added to j's own
+    /// sums ([`Shares`]; what each slot means is the term's). Only called when
+    /// [`PairTerm::SYMMETRIC`]; the default adds i's share and gives j nothing.
+    #[inline(always)]
+    fn pair_both<L: Lane>(&self, me: &Me, p: &Pair<L>, acc: &mut Self::Acc<L>) -> Share<L> {
+        self.pair(me, p, acc);
+        [L::zero(); SHARE]
+    }
+    /// The result of a pass that computed each pair once ([`Pass::sum_both`]); the
+    /// default is [`PairTerm::finish`].
+    #[inline(always)]
+    fn finish_both<L: Lane>(&self, me: &Me, acc: Self::Acc<L>) -> Self::Out {
+        self.finish(me, acc)
+    }
+}
+
+/// Slots of a neighbour's [`Share`].
+pub const SHARE: usize = 4;
+
+/// Neighbour j's share of a group of pairs, in lanes (lane l for neighbour l of the
+/// group): the values added to j's own sums, [`SHARE`] slots whose meaning is the
+/// term's.
+pub type Share<L> = [L; SHARE];
+
+/// Where a pass that computes each pair once ([`Pass::sum_both`]) adds each
+/// neighbour's share of a pair: records of [`SHARE`] sums per particle, a window of
+/// them from particle `start` (joint numbering) on.
+pub struct Shares<'a> {
+    pub start: usize,
+    pub records: &'a mut [[f64; SHARE]],
+}
+
+impl Shares<'_> {
+    /// Adds `values` to particle `j`'s record.
+    ///
+    /// # Panics
+    /// If `j` is outside the window.
+    #[inline(always)]
+    pub fn add(&mut self, j: usize, values: [f64; SHARE]) {
+        let r = &mut self.records[j.wrapping_sub(self.start)];
+        for k in 0..SHARE {
+            r[k] += values[k];
+        }
+    }
 }
 
 /// A term summed together with the count of neighbours nearer than `radius`, in the
@@ -322,6 +371,32 @@ impl<T: PairTerm, const KERNEL_SUM: bool> PairTerm for Counted<T, KERNEL_SUM> {
     fn finish<L: Lane>(&self, me: &Me, acc: Self::Acc<L>) -> Self::Out {
         (self.term.finish(me, acc.0), acc.1.sum() as u32, acc.2.sum())
     }
+
+    /// Without the kernel sum: a share has no slot for it.
+    const SYMMETRIC: bool = T::SYMMETRIC && !KERNEL_SUM;
+    /// The term's share, with the count in slot [`Counted::COUNT_SLOT`] (which the
+    /// term must leave 0).
+    #[inline(always)]
+    fn pair_both<L: Lane>(&self, me: &Me, p: &Pair<L>, acc: &mut Self::Acc<L>) -> Share<L> {
+        let mut share = self.term.pair_both(me, p, &mut acc.0);
+        let within = L::splat(1.0).keep(p.r.lt(L::splat(self.radius)));
+        acc.1 = acc.1 + within;
+        share[Self::COUNT_SLOT] = within;
+        share
+    }
+    #[inline(always)]
+    fn finish_both<L: Lane>(&self, me: &Me, acc: Self::Acc<L>) -> Self::Out {
+        (
+            self.term.finish_both(me, acc.0),
+            acc.1.sum() as u32,
+            acc.2.sum(),
+        )
+    }
+}
+
+impl<T, const KERNEL_SUM: bool> Counted<T, KERNEL_SUM> {
+    /// The slot of a neighbour's [`Share`] that counts the pair (1 within the radius).
+    pub const COUNT_SLOT: usize = 3;
 }
 
 /// A term summed over neighbours with one kernel, on records packed for it, with an
@@ -383,6 +458,30 @@ impl<'a, T: PairTerm, K: Kernel> Pass<'a, T, K> {
     /// If `i` or a neighbour index is beyond the records.
     #[inline]
     pub fn sum(&self, i: usize, neighbours: &[u32]) -> T::Out {
+        self.sum_with::<false>(i, neighbours, None)
+    }
+
+    /// The term's sum for particle `i` over `upper`, its neighbours of higher index,
+    /// with each pair computed once: i's share summed as by [`Pass::sum`] (with
+    /// [`PairTerm::finish_both`]), each neighbour's share added to its record in
+    /// `shares` (in list order, one group of neighbours after the other).
+    ///
+    /// # Panics
+    /// If the term is not [`PairTerm::SYMMETRIC`], if a neighbour is outside the
+    /// window of `shares`, or as [`Pass::sum`].
+    #[inline]
+    pub fn sum_both(&self, i: usize, upper: &[u32], shares: &mut Shares) -> T::Out {
+        assert!(T::SYMMETRIC, "a pair term without neighbours' shares");
+        self.sum_with::<true>(i, upper, Some(shares))
+    }
+
+    #[inline(always)]
+    fn sum_with<const BOTH: bool>(
+        &self,
+        i: usize,
+        neighbours: &[u32],
+        shares: Option<&mut Shares>,
+    ) -> T::Out {
         // The layouts `T` is compiled for (`PairTerm::LAYOUTS`) get a loop with known
         // offsets and no test per field; any other is read with offsets found at run
         // time. The tests are on constants, so a layout a term is not compiled for
@@ -391,18 +490,22 @@ impl<'a, T: PairTerm, K: Kernel> Pass<'a, T, K> {
             ($f:ident) => {{
                 let bits = self.records.fields().bits();
                 if const { T::LAYOUTS.has(Layouts::MOMENTUM) } && bits == Layouts::MOMENTUM_BITS {
-                    return $f::<T, K, { Layouts::MOMENTUM_BITS }>(self, i, neighbours);
+                    return $f::<T, K, { Layouts::MOMENTUM_BITS }, BOTH>(
+                        self, i, neighbours, shares,
+                    );
                 }
                 if const { T::LAYOUTS.has(Layouts::GRADIENT) } && bits == Layouts::GRADIENT_BITS {
-                    return $f::<T, K, { Layouts::GRADIENT_BITS }>(self, i, neighbours);
+                    return $f::<T, K, { Layouts::GRADIENT_BITS }, BOTH>(
+                        self, i, neighbours, shares,
+                    );
                 }
                 if const { T::LAYOUTS.has(Layouts::FILTER) } && bits == Layouts::FILTER_BITS {
-                    return $f::<T, K, { Layouts::FILTER_BITS }>(self, i, neighbours);
+                    return $f::<T, K, { Layouts::FILTER_BITS }, BOTH>(self, i, neighbours, shares);
                 }
                 if const { T::LAYOUTS.has(Layouts::SHEAR) } && bits == Layouts::SHEAR_BITS {
-                    return $f::<T, K, { Layouts::SHEAR_BITS }>(self, i, neighbours);
+                    return $f::<T, K, { Layouts::SHEAR_BITS }, BOTH>(self, i, neighbours, shares);
                 }
-                $f::<T, K, 0>(self, i, neighbours)
+                $f::<T, K, 0, BOTH>(self, i, neighbours, shares)
             }};
         }
         // SAFETY: f64 needs no instructions beyond the baseline; an `Isa` of a SIMD
@@ -410,8 +513,8 @@ impl<'a, T: PairTerm, K: Kernel> Pass<'a, T, K> {
         unsafe {
             match self.isa.0 {
                 IsaKind::Scalar => {
-                    let scalar = |p: &Self, i, js| p.drive::<f64, 0>(i, js);
-                    scalar(self, i, neighbours)
+                    let scalar = |p: &Self, i, js, shares| p.drive::<f64, 0, BOTH>(i, js, shares);
+                    scalar(self, i, neighbours, shares)
                 }
                 #[cfg(target_arch = "x86_64")]
                 IsaKind::Avx512 => {
@@ -435,8 +538,15 @@ impl<'a, T: PairTerm, K: Kernel> Pass<'a, T, K> {
     /// # Safety
     /// L's instructions exist on this processor; a nonzero `FIELDS` is the records'
     /// field set.
+    /// With `BOTH`, the term's [`PairTerm::pair_both`] and each neighbour's share
+    /// added to `shares` (which must then be given).
     #[inline(always)]
-    unsafe fn drive<L: Lane, const FIELDS: u16>(&self, i: usize, neighbours: &[u32]) -> T::Out {
+    unsafe fn drive<L: Lane, const FIELDS: u16, const BOTH: bool>(
+        &self,
+        i: usize,
+        neighbours: &[u32],
+        mut shares: Option<&mut Shares>,
+    ) -> T::Out {
         let (rec, k) = (self.records, &self.kernel);
         // The fields gathered for every group: x, y and m (the geometry), and those
         // the term reads (checked to be in the records by `Pass::new`); constants
@@ -508,9 +618,19 @@ impl<'a, T: PairTerm, K: Kernel> Pass<'a, T, K> {
                 gy: dy * f,
                 fields,
             };
-            term.pair(&me, &p, &mut acc);
+            if let (true, Some(shares)) = (BOTH, shares.as_deref_mut()) {
+                let share = term.pair_both(&me, &p, &mut acc);
+                // SAFETY: L's instructions exist (caller); `scatter` checks every
+                // index against the window.
+                unsafe { L::scatter(js, &share, shares) };
+            } else {
+                term.pair(&me, &p, &mut acc);
+            }
         }
-        term.finish(&me, acc)
+        match BOTH {
+            true => term.finish_both(&me, acc),
+            false => term.finish(&me, acc),
+        }
     }
 }
 

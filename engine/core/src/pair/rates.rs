@@ -2,7 +2,7 @@
 //! dv_i/dt, d rho_i/dt and the dissipation rate, and the terms a scenario names run in
 //! one neighbour loop ([`EquationsOfMotion`]).
 
-use super::{Field, Fields, Lane, Layouts, Me, Pair, PairTerm};
+use super::{Field, Fields, Lane, Layouts, Me, Pair, PairTerm, Share, SHARE};
 use glam::DVec2;
 
 /// One particle's rates in lanes, summed over its neighbours.
@@ -26,6 +26,22 @@ pub struct Rates<L> {
     pub diffusion: L,
 }
 
+impl<L: Lane> Rates<L> {
+    /// Every rate 0.
+    #[inline(always)]
+    pub fn zero() -> Self {
+        let z = L::zero();
+        Rates {
+            coef: z,
+            ax: z,
+            ay: z,
+            drho: z,
+            power: z,
+            diffusion: z,
+        }
+    }
+}
+
 /// A term of the equations of motion, written over the lane type.
 pub trait RateTerm: Sync {
     /// The fields of i and j the term reads.
@@ -38,7 +54,26 @@ pub trait RateTerm: Sync {
     const LAYOUTS: Layouts = Layouts::COMMON;
     /// Adds this term's contribution of one group of neighbours.
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>);
+    /// Whether [`RateTerm::pair_both`] gives j's share too, so that each pair is
+    /// computed once.
+    const SYMMETRIC: bool = false;
+    /// Adds i's contribution to `ri`, as [`RateTerm::pair`], and j's contribution of
+    /// the same pairs to `rj` (zero on entry): the rates of j, whose neighbour i is,
+    /// with x_ji = -x_ij, v_ji = -v_ij and grad_j W_ji = -grad_i W_ij. `rj.coef` is
+    /// not read: a [`Rates::coef`] must be symmetric, C_ji = C_ij, and j gets
+    /// + m_i C_ij grad_i W_ij. Only called when [`RateTerm::SYMMETRIC`].
+    #[inline(always)]
+    fn pair_both<L: Lane>(&self, me: &Me, p: &Pair<L>, ri: &mut Rates<L>, rj: &mut Rates<L>) {
+        let _ = rj;
+        self.pair(me, p, ri)
+    }
 }
+
+/// The slots of a neighbour's [`super::Share`] in a pass of [`EquationsOfMotion`]:
+/// dv_j/dt (x and y) and d rho_j/dt (density diffusion included).
+pub const SHARE_AX: usize = 0;
+pub const SHARE_AY: usize = 1;
+pub const SHARE_DRHO: usize = 2;
 
 /// One particle's rates, summed.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -75,7 +110,8 @@ pub struct EquationsOfMotion<R: RateTerm>(pub R);
 
 impl<R: RateTerm + Clone> PairTerm for EquationsOfMotion<R> {
     const LAYOUTS: Layouts = R::LAYOUTS;
-    type Acc<L: Lane> = Rates<L>;
+    /// i's rates, and the energy rates of the neighbours' shares ([`PairTerm::pair_both`]).
+    type Acc<L: Lane> = (Rates<L>, JEnergy<L>);
     type Out = RateSums;
 
     fn reads(&self) -> Fields {
@@ -83,20 +119,19 @@ impl<R: RateTerm + Clone> PairTerm for EquationsOfMotion<R> {
     }
 
     #[inline(always)]
-    fn zero<L: Lane>(&self) -> Rates<L> {
-        let z = L::zero();
-        Rates {
-            coef: z,
-            ax: z,
-            ay: z,
-            drho: z,
-            power: z,
-            diffusion: z,
-        }
+    fn zero<L: Lane>(&self) -> Self::Acc<L> {
+        (
+            Rates::zero(),
+            JEnergy {
+                power: L::zero(),
+                diffusion: L::zero(),
+            },
+        )
     }
 
     #[inline(always)]
-    fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
+    fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, acc: &mut Self::Acc<L>) {
+        let r = &mut acc.0;
         r.coef = L::zero();
         self.0.pair(me, p, r);
         if R::USES_COEF {
@@ -107,7 +142,8 @@ impl<R: RateTerm + Clone> PairTerm for EquationsOfMotion<R> {
     }
 
     #[inline(always)]
-    fn finish<L: Lane>(&self, me: &Me, r: Rates<L>) -> RateSums {
+    fn finish<L: Lane>(&self, me: &Me, acc: Self::Acc<L>) -> RateSums {
+        let r = acc.0;
         let diffusion = r.diffusion.sum();
         RateSums {
             acc: DVec2::new(r.ax.sum(), r.ay.sum()),
@@ -116,4 +152,54 @@ impl<R: RateTerm + Clone> PairTerm for EquationsOfMotion<R> {
             diffusion: me.get(Field::Mass) * me.get(Field::PRho2) * diffusion,
         }
     }
+
+    const SYMMETRIC: bool = R::SYMMETRIC;
+
+    /// j gets + m_i C_ij grad_i W_ij of the coefficient terms and the terms' own
+    /// shares ([`RateTerm::pair_both`]) in slots [`SHARE_AX`], [`SHARE_AY`] and
+    /// [`SHARE_DRHO`]; its energy rates, (1/2) m_j P_j and m_j (p_j/rho_j^2) D_j, are
+    /// summed here, since only their totals are reported.
+    #[inline(always)]
+    fn pair_both<L: Lane>(&self, me: &Me, p: &Pair<L>, acc: &mut Self::Acc<L>) -> Share<L> {
+        let (r, e) = acc;
+        let mut rj = Rates::zero();
+        r.coef = L::zero();
+        self.0.pair_both(me, p, r, &mut rj);
+        if R::USES_COEF {
+            let mt = p.j(Field::Mass) * r.coef;
+            r.ax = r.ax - mt * p.gx;
+            r.ay = r.ay - mt * p.gy;
+            let mi = me.lanes::<L>(Field::Mass) * r.coef;
+            rj.ax = rj.ax + mi * p.gx;
+            rj.ay = rj.ay + mi * p.gy;
+        }
+        let mj = p.j(Field::Mass);
+        e.power = e.power + mj * rj.power;
+        e.diffusion = e.diffusion + mj * p.j(Field::PRho2) * rj.diffusion;
+        let mut share = [L::zero(); SHARE];
+        share[SHARE_AX] = rj.ax;
+        share[SHARE_AY] = rj.ay;
+        share[SHARE_DRHO] = rj.drho + rj.diffusion;
+        share
+    }
+
+    /// As [`PairTerm::finish`], with the neighbours' energy rates added to i's.
+    #[inline(always)]
+    fn finish_both<L: Lane>(&self, me: &Me, acc: Self::Acc<L>) -> RateSums {
+        let e = acc.1;
+        let own = self.finish(me, acc);
+        RateSums {
+            power: own.power + 0.5 * e.power.sum(),
+            diffusion: own.diffusion + e.diffusion.sum(),
+            ..own
+        }
+    }
+}
+
+/// The energy rates of the neighbours' shares of a particle's pairs, in lanes:
+/// sum_j m_j P_j and sum_j m_j (p_j/rho_j^2) D_j over the pairs (see [`Rates`]).
+#[derive(Clone, Copy)]
+pub struct JEnergy<L> {
+    power: L,
+    diffusion: L,
 }

@@ -7,7 +7,7 @@
 //! that is what makes their safe arithmetic sound.
 
 use super::lane::{sealed::Gather, Lane};
-use super::{Kernel, Me, Pair, PairTerm, Pass, PluginTerm, RateTerm, Rates};
+use super::{Kernel, Me, Pair, PairTerm, Pass, PluginTerm, RateTerm, Rates, Share, Shares, SHARE};
 use crate::kernel::KernelShape;
 use std::any::Any;
 use std::arch::x86_64::*;
@@ -18,13 +18,14 @@ use std::ops::{Add, Div, Mul, Neg, Sub};
 /// # Safety
 /// The processor has AVX-512F and AVX-512VL.
 #[target_feature(enable = "avx512f,avx512vl")]
-pub(super) unsafe fn sum_avx512<T: PairTerm, K: Kernel, const FIELDS: u16>(
+pub(super) unsafe fn sum_avx512<T: PairTerm, K: Kernel, const FIELDS: u16, const BOTH: bool>(
     pass: &Pass<'_, T, K>,
     i: usize,
     js: &[u32],
+    shares: Option<&mut Shares>,
 ) -> T::Out {
     // SAFETY: the caller's contract.
-    unsafe { pass.drive::<Avx512, FIELDS>(i, js) }
+    unsafe { pass.drive::<Avx512, FIELDS, BOTH>(i, js, shares) }
 }
 
 /// A plugin term's pair function for lane type `L` ([`PluginTerm`]).
@@ -87,13 +88,14 @@ pub(super) unsafe fn plugin_avx2<T: RateTerm + 'static>(
 /// # Safety
 /// The processor has AVX2.
 #[target_feature(enable = "avx2")]
-pub(super) unsafe fn sum_avx2<T: PairTerm, K: Kernel, const FIELDS: u16>(
+pub(super) unsafe fn sum_avx2<T: PairTerm, K: Kernel, const FIELDS: u16, const BOTH: bool>(
     pass: &Pass<'_, T, K>,
     i: usize,
     js: &[u32],
+    shares: Option<&mut Shares>,
 ) -> T::Out {
     // SAFETY: the caller's contract.
-    unsafe { pass.drive::<Avx2, FIELDS>(i, js) }
+    unsafe { pass.drive::<Avx2, FIELDS, BOTH>(i, js, shares) }
 }
 
 /// The element-wise operators of a lane type through its `each`.
@@ -198,6 +200,41 @@ fn reduce(a: [f64; 8]) -> f64 {
 }
 
 impl Gather for Avx512 {
+    /// The four slots transposed into one 256-bit record per neighbour in registers
+    /// (four unpacks, four two-source permutes), each added to its record whole.
+    #[inline(always)]
+    unsafe fn scatter(js: &[u32], share: &Share<Self>, shares: &mut Shares) {
+        const _: () = assert!(SHARE == 4);
+        debug_assert!((1..=8).contains(&js.len()));
+        let [a, b, c, d] = share.map(|v| v.0);
+        // SAFETY: the features (caller); each record written is checked to be in the
+        // window (`record`).
+        unsafe {
+            let (t0, t1) = (_mm512_unpacklo_pd(a, b), _mm512_unpackhi_pd(a, b));
+            let (t2, t3) = (_mm512_unpacklo_pd(c, d), _mm512_unpackhi_pd(c, d));
+            // (a_l b_l c_l d_l) for lanes 0 and 2, 4 and 6 (from t0, t2), 1 and 3,
+            // 5 and 7 (from t1, t3).
+            let lo = _mm512_set_epi64(11, 10, 3, 2, 9, 8, 1, 0);
+            let hi = _mm512_set_epi64(15, 14, 7, 6, 13, 12, 5, 4);
+            let pick = |x, idx, y| _mm512_permutex2var_pd(x, idx, y);
+            let pairs = [
+                pick(t0, lo, t2),
+                pick(t1, lo, t3),
+                pick(t0, hi, t2),
+                pick(t1, hi, t3),
+            ];
+            for (l, &j) in js.iter().enumerate() {
+                // Lane l is half (l >> 1) & 1 of pairs[(l & 1) + 2 (l >> 2)].
+                let v = pairs[(l & 1) + 2 * (l >> 2)];
+                let v = match (l >> 1) & 1 {
+                    0 => _mm512_castpd512_pd256(v),
+                    _ => _mm512_extractf64x4_pd::<1>(v),
+                };
+                let r = record(shares, j);
+                _mm256_storeu_pd(r, _mm256_add_pd(_mm256_loadu_pd(r), v));
+            }
+        }
+    }
     #[inline(always)]
     fn plugin_pair(t: &PluginTerm, me: &Me, p: &Pair<Self>, r: &mut Rates<Self>) {
         // SAFETY: a value of this type (here `p`'s lanes) exists only on a processor
@@ -385,6 +422,32 @@ fn avx2_array(v: Avx2) -> [f64; 8] {
 }
 
 impl Gather for Avx2 {
+    /// The four slots transposed into one 256-bit record per neighbour in registers
+    /// (a 4 x 4 transpose per half), each added to its record whole.
+    #[inline(always)]
+    unsafe fn scatter(js: &[u32], share: &Share<Self>, shares: &mut Shares) {
+        const _: () = assert!(SHARE == 4);
+        debug_assert!((1..=8).contains(&js.len()));
+        for (half, js) in js.chunks(4).enumerate() {
+            let [a, b, c, d] = share.map(|v| v.0[half]);
+            // SAFETY: the features (caller); each record written is checked to be in
+            // the window (`record`).
+            unsafe {
+                let (t0, t1) = (_mm256_unpacklo_pd(a, b), _mm256_unpackhi_pd(a, b));
+                let (t2, t3) = (_mm256_unpacklo_pd(c, d), _mm256_unpackhi_pd(c, d));
+                let rows = [
+                    _mm256_insertf128_pd::<1>(t0, _mm256_castpd256_pd128(t2)),
+                    _mm256_insertf128_pd::<1>(t1, _mm256_castpd256_pd128(t3)),
+                    _mm256_permute2f128_pd::<0x31>(t0, t2),
+                    _mm256_permute2f128_pd::<0x31>(t1, t3),
+                ];
+                for (&v, &j) in rows.iter().zip(js) {
+                    let r = record(shares, j);
+                    _mm256_storeu_pd(r, _mm256_add_pd(_mm256_loadu_pd(r), v));
+                }
+            }
+        }
+    }
     #[inline(always)]
     fn plugin_pair(t: &PluginTerm, me: &Me, p: &Pair<Self>, r: &mut Rates<Self>) {
         // SAFETY: a value of this type (here `p`'s lanes) exists only on a processor
@@ -502,4 +565,13 @@ unsafe fn avx2_columns(
         );
         (_mm256_unpacklo_pd(x, y), _mm256_unpackhi_pd(x, y))
     }
+}
+
+/// Particle `j`'s record in `shares`, as a pointer to its four f64s.
+///
+/// # Panics
+/// If `j` is outside the window.
+#[inline(always)]
+fn record(shares: &mut Shares, j: u32) -> *mut f64 {
+    shares.records[(j as usize).wrapping_sub(shares.start)].as_mut_ptr()
 }
