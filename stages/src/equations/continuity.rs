@@ -59,7 +59,7 @@ impl Stage for ContinuityStage {
             power: false,
             wall: false,
             counts: false,
-            once: crate::forces::Pairs::Auto.once(),
+            once: rates::Pairs::Auto.once(),
         };
         rates::run(sim, &self.terms, out, &mut self.scratch, None).map(|_| ())
     }

@@ -5,7 +5,7 @@
 //! and, with the `Continuity()` term, d rho_i/dt = sum_j m_j v_ij . grad_i W_ij in the
 //! same loop (one pass over the neighbours instead of two).
 
-use crate::rates::{self, Outputs};
+use crate::rates::{self, Outputs, Pairs};
 use crate::terms::{
     artificial_viscosity, plugin_terms, pressure_gradient, term_list_seed, PrePass, RateTerms,
     TermRegistry, TermSpec,
@@ -36,28 +36,6 @@ pub struct Params {
     /// the scalar path and from each side on the SIMD paths (where each side is
     /// faster: docs/performance.md, "Each pair once"); `Once` or `Twice` to choose.
     pub pairs: Pairs,
-}
-
-/// How a pass computes each fluid pair ([`Params::pairs`]).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, serde::Deserialize)]
-pub enum Pairs {
-    #[default]
-    Auto,
-    /// Once, for both particles, each particle summing its neighbours of higher index.
-    Once,
-    /// From each side: each particle sums its whole list.
-    Twice,
-}
-
-impl Pairs {
-    /// Whether the pass computes each pair once on the instruction set it runs.
-    pub(crate) fn once(self) -> bool {
-        match self {
-            Pairs::Auto => sph_core::pair::Isa::detect() == sph_core::pair::Isa::SCALAR,
-            Pairs::Once => true,
-            Pairs::Twice => false,
-        }
-    }
 }
 
 impl Default for Params {

@@ -31,6 +31,29 @@ pub(crate) fn declare_reads(access: Access, fields: Fields) -> Access {
         .reads_if::<Pressure>(has(&[Field::PRho2]))
 }
 
+/// How a pass computes each fluid pair (`Forces(pairs)`; the `Continuity` stage runs
+/// `Auto`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum Pairs {
+    #[default]
+    Auto,
+    /// Once, for both particles, each particle summing its neighbours of higher index.
+    Once,
+    /// From each side: each particle sums its whole list.
+    Twice,
+}
+
+impl Pairs {
+    /// Whether the pass computes each pair once on the instruction set it runs.
+    pub(crate) fn once(self) -> bool {
+        match self {
+            Pairs::Auto => sph_core::pair::Isa::detect() == sph_core::pair::Isa::SCALAR,
+            Pairs::Once => true,
+            Pairs::Twice => false,
+        }
+    }
+}
+
 /// Fluid particles per parallel chunk.
 const CHUNK: usize = 256;
 
@@ -52,7 +75,7 @@ pub(crate) struct Outputs {
     /// the same loop (lists with a skin hold more).
     pub counts: bool,
     /// Each fluid pair computed once for both particles, where the terms allow it
-    /// (`forces::Pairs`).
+    /// ([`Pairs`]).
     pub once: bool,
 }
 
