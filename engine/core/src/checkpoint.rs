@@ -19,14 +19,18 @@ use crate::components::{
     Acceleration, Density, DensityRate, Fluid, Ghost, Mass, MirrorWall, NeighbourCount, ParticleId,
     Position, Pressure, Velocity,
 };
+use crate::dim::Vector;
 use crate::world::archetype;
-use glam::DVec2;
+use glam::{DVec2, DVec3};
 use hecs::{Archetype, Component, World};
 use std::fs;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-const MAGIC: &[u8; 8] = b"SPHCKPT\0";
+/// The first bytes of a 2D and of a 3D checkpoint: each build writes and reads its own
+/// dimension's (2D's unchanged since the first checkpoints).
+const MAGICS: [&[u8; 8]; 2] = [b"SPHCKPT\0", b"SPHCK3D\0"];
+const MAGIC: &[u8; 8] = MAGICS[crate::dim::DIM - 2];
 /// 2: the ghosts' `MirrorWall` column joined the ghost columns.
 const VERSION: u32 = 2;
 /// The newest checkpoint's file name.
@@ -41,6 +45,12 @@ pub const TEMPORARY: &str = "checkpoint.bin.tmp";
 pub enum StateError {
     #[error("not a checkpoint file (bad magic number or truncated)")]
     NotCheckpoint,
+    /// A checkpoint of the other dimension's build.
+    #[error(
+        "a {found}D checkpoint; this engine is built for {}D runs",
+        crate::dim::DIM
+    )]
+    Dimension { found: usize },
     #[error("checksum mismatch: the file is truncated or damaged")]
     Checksum,
     #[error(
@@ -169,6 +179,9 @@ pub fn seal(mut e: Enc) -> Vec<u8> {
 /// keeps the file's buffer (no copy).
 pub fn decode(mut bytes: Vec<u8>, file: &Path) -> Result<Checkpoint, StateError> {
     if bytes.len() < MAGIC.len() + 8 || &bytes[..MAGIC.len()] != MAGIC {
+        if let Some(k) = MAGICS.iter().position(|m| bytes.starts_with(*m)) {
+            return Err(StateError::Dimension { found: k + 2 });
+        }
         return Err(StateError::NotCheckpoint);
     }
     let (body, sum) = bytes.split_at(bytes.len() - 8);
@@ -478,6 +491,18 @@ impl Field for DVec2 {
     }
 }
 
+impl Field for DVec3 {
+    const BYTES: usize = 24;
+    fn put(&self, e: &mut Enc) {
+        e.f64(self.x);
+        e.f64(self.y);
+        e.f64(self.z);
+    }
+    fn get(d: &mut Dec) -> Result<Self, StateError> {
+        Ok(DVec3::new(d.f64()?, d.f64()?, d.f64()?))
+    }
+}
+
 /// Implements [`Field`] for one-field tuple structs (components) by their inner value.
 #[macro_export]
 macro_rules! checkpoint_newtype {
@@ -497,12 +522,12 @@ macro_rules! checkpoint_newtype {
 }
 
 checkpoint_newtype!(
-    Position(DVec2),
-    Velocity(DVec2),
+    Position(Vector),
+    Velocity(Vector),
     Density(f64),
     Pressure(f64),
     Mass(f64),
-    Acceleration(DVec2),
+    Acceleration(Vector),
     DensityRate(f64),
     NeighbourCount(u32),
     ParticleId(u32),
@@ -694,6 +719,27 @@ mod tests {
         let mut flipped = bytes.clone();
         flipped[30] ^= 1;
         assert_eq!(decode(flipped, Path::new("c")), Err(StateError::Checksum));
+    }
+
+    /// A checkpoint of the other dimension is refused by name, whichever build reads
+    /// it (its magic number is the other one), not as a damaged file.
+    #[test]
+    fn a_checkpoint_of_the_other_dimension_is_refused_as_such() {
+        let origin = Origin {
+            scenario: "/x/s.ron".into(),
+            sets: vec![],
+        };
+        let mut bytes = encode(1, 0.5, 3, &origin, b"payload");
+        let other = 5 - crate::dim::DIM;
+        bytes[..8].copy_from_slice(MAGICS[other - 2]);
+        let err = decode(bytes, Path::new("c")).unwrap_err();
+        assert_eq!(err, StateError::Dimension { found: other });
+        let text = err.to_string();
+        assert!(
+            text.contains(&format!("a {other}D checkpoint"))
+                && text.contains(&format!("built for {}D runs", crate::dim::DIM)),
+            "{text}"
+        );
     }
 
     #[test]

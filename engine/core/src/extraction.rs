@@ -8,10 +8,10 @@
 //! filter, the same method averaged over the face).
 
 use crate::components::WallPose;
+use crate::dim::Vector;
 use crate::sim::Sim;
 use crate::stage::StepError;
 use crate::world::Particles;
-use glam::DVec2;
 use std::collections::BTreeMap;
 
 /// Hydrostatic carry of a pressure in the (possibly accelerating) tank frame:
@@ -20,12 +20,12 @@ use std::collections::BTreeMap;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Carry {
     pub rho0: f64,
-    pub g: DVec2,
+    pub g: Vector,
 }
 
 impl Carry {
     /// Pressure `p` read at `from`, carried to `to`.
-    pub fn carry(self, p: f64, from: DVec2, to: DVec2) -> f64 {
+    pub fn carry(self, p: f64, from: Vector, to: Vector) -> f64 {
         p + self.rho0 * self.g.dot(to - from)
     }
 }
@@ -38,6 +38,9 @@ pub struct Site<'a> {
     /// The reading's abscissa along the wall [m] (the sensor's centre, or a point of
     /// its face).
     pub along: f64,
+    /// The reading's abscissa along the wall's second edge (a->c) [m] (3D).
+    #[cfg(feature = "dim3")]
+    pub across: f64,
     /// The sensor's width S along the wall [m] (the face Method III averages over).
     pub width: f64,
     /// The hydrostatic carry in the wall's frame.
@@ -46,8 +49,11 @@ pub struct Site<'a> {
 
 impl Site<'_> {
     /// The reading's point, in the world frame.
-    pub fn point(&self) -> DVec2 {
-        self.wall.point(self.along)
+    pub fn point(&self) -> Vector {
+        #[cfg(not(feature = "dim3"))]
+        return self.wall.point(self.along);
+        #[cfg(feature = "dim3")]
+        return self.wall.point(self.along) + self.across * self.wall.tangent_across();
     }
 }
 
@@ -170,6 +176,7 @@ impl<'de> serde::de::Visitor<'de> for MethodListSeed<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::dim;
 
     struct Zero;
     impl ExtractionMethod for Zero {
@@ -247,20 +254,29 @@ mod tests {
     #[test]
     fn a_site_is_a_point_along_its_wall() {
         let wall = WallPose {
-            a: DVec2::new(1.0, 2.0),
-            b: DVec2::new(4.0, 6.0),
+            a: dim::xy(1.0, 2.0),
+            b: dim::xy(4.0, 6.0),
+            #[cfg(feature = "dim3")]
+            c: Vector::new(1.0, 2.0, 2.0),
             body: Default::default(),
         };
         let site = Site {
             wall: &wall,
             along: 2.5,
+            #[cfg(feature = "dim3")]
+            across: 0.5,
             width: 0.01,
             carry: Carry {
                 rho0: 1000.0,
-                g: DVec2::ZERO,
+                g: Vector::ZERO,
             },
         };
-        assert!((site.point() - DVec2::new(2.5, 4.0)).length() < 1e-15);
+        // 2.5 m along a->b (a 3-4-5 triangle), in 3D also 0.5 m along a->c.
+        let mut want = dim::xy(2.5, 4.0);
+        if dim::DIM == 3 {
+            want[dim::DIM - 1] = 0.5;
+        }
+        assert!((site.point() - want).length() < 1e-15);
         assert!(!Zero.needs_grid());
     }
 
@@ -268,10 +284,10 @@ mod tests {
     fn the_carry_adds_the_hydrostatic_difference() {
         let c = Carry {
             rho0: 1000.0,
-            g: DVec2::new(0.0, -9.81),
+            g: dim::xy(0.0, -9.81),
         };
         // 0.1 m deeper reads rho g 0.1 more.
-        let p = c.carry(50.0, DVec2::new(0.3, 0.2), DVec2::new(0.0, 0.1));
+        let p = c.carry(50.0, dim::xy(0.3, 0.2), dim::xy(0.0, 0.1));
         assert!((p - (50.0 + 981.0)).abs() < 1e-9, "{p}");
     }
 }

@@ -14,6 +14,7 @@ pub mod atomic;
 pub mod checkpoint;
 pub mod components;
 pub mod contract;
+pub mod dim;
 pub mod extraction;
 pub mod extremes;
 pub mod kernel;

@@ -6,6 +6,7 @@
 //! tank is at x = P + (s, hv) + R(theta) (q - P) in the world, P the pivot, (s, hv) the
 //! sway and heave, theta the roll angle (counter-clockwise positive).
 
+use crate::dim::{self, Vector};
 use crate::units::Positive;
 use glam::DVec2;
 use serde::{Deserialize, Serialize};
@@ -63,50 +64,52 @@ pub struct RigidState {
     pub angle: f64,
     pub omega: f64,
     pub alpha: f64,
-    /// Displacement of the pivot [m], its velocity and acceleration.
-    pub offset: DVec2,
-    pub velocity: DVec2,
-    pub acceleration: DVec2,
+    /// Displacement of the pivot [m], its velocity and acceleration (in the x-y
+    /// plane: sway and heave).
+    pub offset: Vector,
+    pub velocity: Vector,
+    pub acceleration: Vector,
 }
 
 /// Where the tank frame is: maps tank-frame points to the world and back, and gives the
 /// rigid velocity and acceleration of any world point attached to the tank.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Pose {
-    /// The pivot in the tank frame (and in the world at rest).
-    pub pivot: DVec2,
+    /// The pivot in the tank frame (and in the world at rest); in 3D the roll axis is
+    /// the line through it along z.
+    pub pivot: Vector,
     pub state: RigidState,
 }
 
 /// A [`Pose`]'s map from the tank frame to the world ([`Pose::placement`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Placement {
-    centre: DVec2,
-    pivot: DVec2,
+    centre: Vector,
+    pivot: Vector,
     /// (cos, sin) of the angle.
     rotation: DVec2,
 }
 
 impl Placement {
     /// A tank-frame point in the world.
-    pub fn to_world(&self, q: DVec2) -> DVec2 {
-        self.centre + self.rotation.rotate(q - self.pivot)
+    pub fn to_world(&self, q: Vector) -> Vector {
+        self.centre + dim::rotate_z(self.rotation, q - self.pivot)
     }
 }
 
 impl Pose {
-    pub fn at_rest(pivot: DVec2) -> Self {
+    pub fn at_rest(pivot: Vector) -> Self {
         Self {
             pivot,
             state: RigidState::default(),
         }
     }
     /// The pivot's world position.
-    pub fn centre(&self) -> DVec2 {
+    pub fn centre(&self) -> Vector {
         self.pivot + self.state.offset
     }
     /// A tank-frame point in the world.
-    pub fn to_world(&self, q: DVec2) -> DVec2 {
+    pub fn to_world(&self, q: Vector) -> Vector {
         self.placement().to_world(q)
     }
     /// The map from the tank frame to the world, its rotation worked out once (for
@@ -119,17 +122,19 @@ impl Pose {
         }
     }
     /// A world point in the tank frame.
-    pub fn to_body(&self, x: DVec2) -> DVec2 {
-        self.pivot + DVec2::from_angle(-self.state.angle).rotate(x - self.centre())
+    pub fn to_body(&self, x: Vector) -> Vector {
+        self.pivot + dim::rotate_z(DVec2::from_angle(-self.state.angle), x - self.centre())
     }
     /// Velocity of the tank at world point x: V + omega k x r.
-    pub fn velocity_at(&self, x: DVec2) -> DVec2 {
-        self.state.velocity + self.state.omega * (x - self.centre()).perp()
+    pub fn velocity_at(&self, x: Vector) -> Vector {
+        self.state.velocity + self.state.omega * dim::z_cross(x - self.centre())
     }
-    /// Acceleration of the tank at world point x: A + alpha k x r - omega^2 r.
-    pub fn acceleration_at(&self, x: DVec2) -> DVec2 {
+    /// Acceleration of the tank at world point x: A + alpha k x r - omega^2 r, r's part
+    /// in the x-y plane (the distance from the z axis through the pivot).
+    pub fn acceleration_at(&self, x: Vector) -> Vector {
         let r = x - self.centre();
-        self.state.acceleration + self.state.alpha * r.perp() - self.state.omega.powi(2) * r
+        self.state.acceleration + self.state.alpha * dim::z_cross(r)
+            - self.state.omega.powi(2) * dim::in_xy(r)
     }
 }
 
@@ -345,7 +350,7 @@ impl MotionSeries {
 /// The tank's prescribed motion: a component of the tank entity.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Motion {
-    pub pivot: DVec2,
+    pub pivot: Vector,
     tilt: f64,
     roll: Option<Wave>,
     sway: Option<Wave>,
@@ -356,7 +361,7 @@ pub struct Motion {
 
 impl Motion {
     /// From the scenario's spec; `series` is the already-read table when the spec names one.
-    pub fn new(spec: &MotionSpec, pivot: DVec2, series: Option<MotionSeries>) -> Self {
+    pub fn new(spec: &MotionSpec, pivot: Vector, series: Option<MotionSeries>) -> Self {
         let wave = |s: &Option<HarmonicSpec>, scale| s.as_ref().map(|s| Wave::from_spec(s, scale));
         let longest = [&spec.roll, &spec.sway, &spec.heave]
             .into_iter()
@@ -413,9 +418,9 @@ impl Motion {
             angle: angle[0],
             omega: angle[1],
             alpha: angle[2],
-            offset: DVec2::new(x[0], y[0]),
-            velocity: DVec2::new(x[1], y[1]),
-            acceleration: DVec2::new(x[2], y[2]),
+            offset: dim::xy(x[0], y[0]),
+            velocity: dim::xy(x[1], y[1]),
+            acceleration: dim::xy(x[2], y[2]),
         }
     }
 
@@ -485,14 +490,14 @@ mod tests {
     fn harmonic_roll_with_ramp_is_smooth_and_consistent() {
         let m = Motion::new(
             &spec("(roll: (amplitude: 4.0, period: 1.5), sway: (amplitude: 0.01, period: 0.7, phase: 30.0), tilt: 2.0)"),
-            DVec2::new(0.45, 0.0),
+            dim::xy(0.45, 0.0),
             None,
         );
         // Starts at rest (the cosine ramp starts with a finite acceleration), reaches
         // the full harmonic after one (the longest) period.
         let s0 = m.state(0.0);
         assert_eq!((s0.angle, s0.omega), (0.0, 0.0));
-        assert_eq!((s0.offset, s0.velocity), (DVec2::ZERO, DVec2::ZERO));
+        assert_eq!((s0.offset, s0.velocity), (Vector::ZERO, Vector::ZERO));
         let late = m.state(10.0);
         let expected = (2.0f64 + 4.0 * (2.0 * PI * 10.0 / 1.5).sin()).to_radians();
         assert!((late.angle - expected).abs() < 1e-12);
@@ -503,11 +508,12 @@ mod tests {
     fn pose_round_trips_and_gives_rigid_velocity() {
         let m = Motion::new(
             &spec("(roll: (amplitude: 10.0, period: 2.0), ramp: 0.0)"),
-            DVec2::new(0.5, 0.0),
+            dim::xy(0.5, 0.0),
             None,
         );
         let pose = m.pose(0.3);
-        let q = DVec2::new(0.1, 0.4);
+        // Off the x-y plane in 3D: a turn about z keeps z.
+        let q = dim::xy(0.1, 0.4) + 0.3 * (Vector::ONE - dim::in_xy(Vector::ONE));
         let x = pose.to_world(q);
         assert!((pose.to_body(x) - q).length() < 1e-12);
         // Distance to the pivot is kept; velocity is the derivative of the world position.
@@ -529,7 +535,7 @@ mod tests {
             text += &format!("{t},{},{},0\n", 5.0 * (2.0 * t).sin(), 0.02 * t * t);
         }
         let s = MotionSeries::parse(&text).unwrap();
-        let m = Motion::new(&MotionSpec::default(), DVec2::ZERO, Some(s));
+        let m = Motion::new(&MotionSpec::default(), Vector::ZERO, Some(s));
         let st = m.state(1.234);
         assert!((st.angle - (5.0 * (2.0f64 * 1.234).sin()).to_radians()).abs() < 1e-6);
         assert!((st.omega - (10.0 * (2.0f64 * 1.234).cos()).to_radians()).abs() < 1e-4);

@@ -5,10 +5,10 @@
 //! kinematics ([`crate::kinematics`]) moves it independently of the tank, ghost walls
 //! mirror across it with its velocity, and a probe finds it by its component.
 
+use crate::dim::{self, Vector};
 use crate::motion::{HarmonicSpec, Motion, MotionSeries, MotionSpec, SHORTEST_TIME};
 use crate::units::shown;
 use crate::units::Positive;
-use glam::DVec2;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -43,16 +43,17 @@ pub struct PistonSpec {
 }
 
 impl PistonSpec {
-    /// The wall's ends: from the top to the floor, so the fluid is on its right.
-    pub fn ends(&self, tank_height: f64) -> (DVec2, DVec2) {
+    /// The wall's ends: from the top to the floor, so the fluid is on its right (in
+    /// 3D the wall's a and b, at z = 0).
+    pub fn ends(&self, tank_height: f64) -> (Vector, Vector) {
         let h = self.height.map_or(tank_height, |h| h.0);
-        (DVec2::new(self.x, h), DVec2::new(self.x, 0.0))
+        (dim::xy(self.x, h), dim::xy(self.x, 0.0))
     }
 
     /// The paddle's motion; `source` is the scenario file (for the series path). The
     /// error names the field at fault.
     pub fn motion(&self, source: &Path) -> Result<Motion, (&'static str, String)> {
-        let pivot = DVec2::new(self.x, 0.0);
+        let pivot = dim::xy(self.x, 0.0);
         if let Some(file) = &self.series {
             if self.stroke.is_some() || self.period.is_some() {
                 return Err((

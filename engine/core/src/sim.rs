@@ -1,8 +1,8 @@
 //! The simulation state every stage sees: the particle world plus the run's constants,
 //! clock and shared resources.
 
+use crate::dim::Vector;
 use crate::kernel::KernelKind;
-use glam::DVec2;
 use std::any::{Any, TypeId};
 use std::collections::{BTreeMap, HashMap};
 use std::path::PathBuf;
@@ -128,7 +128,7 @@ mod tests {
 pub struct Constants {
     pub eos: Tait,
     /// Gravity [m/s^2].
-    pub gravity: DVec2,
+    pub gravity: Vector,
     /// Initial particle spacing ds [m].
     pub spacing: f64,
     /// Smoothing length h [m].
@@ -137,7 +137,7 @@ pub struct Constants {
     /// Height of the tallest initial fluid block H [m] (pressure scale rho_0 g H).
     pub fluid_height: f64,
     /// Particles outside this box have left the domain (an instability).
-    pub domain: (DVec2, DVec2),
+    pub domain: (Vector, Vector),
 }
 
 impl Constants {

@@ -1,7 +1,7 @@
 //! The stage trait: one step of the pipeline (neighbour grid, density, EOS, forces, ...).
 
+use crate::dim::Vector;
 use crate::sim::Sim;
-use glam::DVec2;
 
 pub use crate::checkpoint::StateError;
 
@@ -86,7 +86,7 @@ pub enum StepError {
     Unstable {
         what: String,
         particle: Option<u32>,
-        position: Option<DVec2>,
+        position: Option<Vector>,
     },
     /// Writing an output failed.
     #[error("output {path}: {message}")]
@@ -103,9 +103,15 @@ pub enum StepError {
     Internal(String),
 }
 
-fn particle_text(particle: &Option<u32>, position: &Option<DVec2>) -> String {
+fn particle_text(particle: &Option<u32>, position: &Option<Vector>) -> String {
     match (particle, position) {
+        #[cfg(not(feature = "dim3"))]
         (Some(i), Some(x)) => format!(" (particle {i} at x = {:.4} m, y = {:.4} m)", x.x, x.y),
+        #[cfg(feature = "dim3")]
+        (Some(i), Some(x)) => format!(
+            " (particle {i} at x = {:.4} m, y = {:.4} m, z = {:.4} m)",
+            x.x, x.y, x.z
+        ),
         (Some(i), None) => format!(" (particle {i})"),
         _ => String::new(),
     }

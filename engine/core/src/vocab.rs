@@ -29,11 +29,11 @@
 
 use crate::components::Position;
 pub use crate::components::{BodyPose, MirrorWall, WallPose};
+use crate::dim::Vector;
 pub use crate::piston::Piston;
 use crate::sim::Sim;
 use crate::stage::{SetupError, StepError};
 pub use crate::walls::Walls;
-use glam::DVec2;
 use rayon::prelude::*;
 
 /// Fluid particles per block of neighbour lists (a power of two, so [`Neighbours::of`]
@@ -47,6 +47,21 @@ pub const REACH: usize = 1;
 
 /// Rows (and columns) of cells searched around a particle.
 pub const ROWS: usize = 2 * REACH + 1;
+
+/// The runs of cells searched around a particle ([`CellGrid::ranges_near`]): one per
+/// row of cells in 2D, one per row and layer in 3D.
+pub const RANGES: usize = if crate::dim::DIM == 2 {
+    ROWS
+} else {
+    ROWS * ROWS
+};
+
+/// A cell's (column, row) in 2D, (column, row, layer) in 3D.
+#[cfg(not(feature = "dim3"))]
+pub type Cell = (usize, usize);
+/// A cell's (column, row) in 2D, (column, row, layer) in 3D.
+#[cfg(feature = "dim3")]
+pub type Cell = (usize, usize, usize);
 
 /// Resizes `v` to `n` elements; when its capacity must grow, to `n` and an eighth more,
 /// not by doubling: buffers that keep their capacity from step to step would otherwise
@@ -63,63 +78,102 @@ pub fn resize_by_eighths<T: Clone>(v: &mut Vec<T>, n: usize, value: T) {
 /// it for point queries ([`CellGrid::for_each_near`]).
 #[derive(Default)]
 pub struct CellGrid {
-    pub origin: DVec2,
+    pub origin: Vector,
     /// Cell size [m].
     pub cell: f64,
     pub nx: usize,
     pub ny: usize,
+    /// Layers of cells along z (3D).
+    #[cfg(feature = "dim3")]
+    pub nz: usize,
     /// `start[c]..start[c+1]` indexes `particles` (and `xs`) for cell c.
     pub start: Vec<u32>,
     /// Joint indices, cell by cell, ascending within a cell.
     pub particles: Vec<u32>,
-    /// x and y of the positions in the order of `particles` (separate arrays), so a
-    /// candidate scan reads contiguous memory and its distance test vectorises.
+    /// x and y (and z in 3D) of the positions in the order of `particles` (separate
+    /// arrays), so a candidate scan reads contiguous memory and its distance test
+    /// vectorises.
     pub xs: Vec<f64>,
     pub ys: Vec<f64>,
+    #[cfg(feature = "dim3")]
+    pub zs: Vec<f64>,
     /// Each particle's cell (scratch kept between steps).
     pub cells: Vec<u32>,
 }
 
 impl CellGrid {
     /// Sets the grid geometry: cells of size `cell` covering `domain`.
-    pub fn shape(&mut self, domain: (DVec2, DVec2), cell: f64) {
+    pub fn shape(&mut self, domain: (Vector, Vector), cell: f64) {
         self.origin = domain.0;
         self.cell = cell;
         let extent = domain.1 - domain.0;
         self.nx = ((extent.x / cell).ceil() as usize).max(1);
         self.ny = ((extent.y / cell).ceil() as usize).max(1);
+        #[cfg(feature = "dim3")]
+        {
+            self.nz = ((extent.z / cell).ceil() as usize).max(1);
+        }
     }
 
-    /// The cell (column, row) holding `x`, clamped to the grid.
+    /// The cell holding `x`, clamped to the grid.
     #[inline(always)]
-    pub fn cell_of(&self, x: DVec2) -> (usize, usize) {
+    pub fn cell_of(&self, x: Vector) -> Cell {
         // floor by truncation (a positive number truncates to its floor; anything
         // else, NaN included, goes to cell 0 as the clamp did): `f64::floor` is a
         // library call on baseline x86-64.
         let c = (x - self.origin) / self.cell;
         let index = |c: f64, n: usize| if c > 0.0 { (c as usize).min(n - 1) } else { 0 };
-        (index(c.x, self.nx), index(c.y, self.ny))
+        #[cfg(not(feature = "dim3"))]
+        return (index(c.x, self.nx), index(c.y, self.ny));
+        #[cfg(feature = "dim3")]
+        return (
+            index(c.x, self.nx),
+            index(c.y, self.ny),
+            index(c.z, self.nz),
+        );
     }
 
-    /// The index of the cell holding `x`.
+    /// The index of the cell holding `x` (x fastest, then y, then z).
     #[inline(always)]
-    pub fn index_of(&self, x: DVec2) -> usize {
-        let (cx, cy) = self.cell_of(x);
-        cy * self.nx + cx
+    pub fn index_of(&self, x: Vector) -> usize {
+        #[cfg(not(feature = "dim3"))]
+        {
+            let (cx, cy) = self.cell_of(x);
+            cy * self.nx + cx
+        }
+        #[cfg(feature = "dim3")]
+        {
+            let (cx, cy, cz) = self.cell_of(x);
+            (cz * self.ny + cy) * self.nx + cx
+        }
     }
 
-    /// The index ranges (into `particles` / `xs`) of the `ROWS` x `ROWS` cells around
-    /// `x`, one per row of cells, in the fixed order (rows bottom to top).
+    /// The index ranges (into `particles` / `xs`) of the `ROWS` x `ROWS` (3D: x
+    /// `ROWS`) cells around `x`, one per row of cells, in the fixed order (rows bottom
+    /// to top; in 3D layer by layer, front to back).
     #[inline(always)]
-    pub fn ranges_near(&self, x: DVec2) -> [std::ops::Range<usize>; ROWS] {
-        let (cx, cy) = self.cell_of(x);
+    pub fn ranges_near(&self, x: Vector) -> [std::ops::Range<usize>; RANGES] {
+        #[cfg(not(feature = "dim3"))]
+        let ((cx, cy), layer) = (self.cell_of(x), |_: usize| Some(0));
+        #[cfg(feature = "dim3")]
+        let ((cx, cy), layer) = {
+            let (cx, cy, cz) = self.cell_of(x);
+            let nz = self.nz;
+            ((cx, cy), move |k: usize| {
+                let z = cz + k / ROWS;
+                (z >= REACH && z - REACH < nz).then(|| (z - REACH) * self.ny)
+            })
+        };
         let (x0, x1) = (cx.saturating_sub(REACH), (cx + REACH).min(self.nx - 1));
         std::array::from_fn(|k| {
-            let y = cy + k;
+            let y = cy + k % ROWS;
+            let Some(rows_below) = layer(k) else {
+                return 0..0;
+            };
             if y < REACH || y - REACH >= self.ny {
                 return 0..0;
             }
-            let r = (y - REACH) * self.nx;
+            let r = (rows_below + y - REACH) * self.nx;
             self.start[r + x0] as usize..self.start[r + x1 + 1] as usize
         })
     }
@@ -127,7 +181,7 @@ impl CellGrid {
     /// Calls `f(j)` for every particle within one support of `x` or a little farther
     /// (the cells around it), in the fixed order.
     #[inline]
-    pub fn for_each_near(&self, x: DVec2, mut f: impl FnMut(u32)) {
+    pub fn for_each_near(&self, x: Vector, mut f: impl FnMut(u32)) {
         if self.start.is_empty() {
             return;
         }
@@ -168,7 +222,7 @@ pub struct Neighbours {
     /// step (`NeighbourGrid(skin)`).
     pub skin: f64,
     /// The joint positions (fluid, then ghosts) the lists were built from.
-    pub built_at: Vec<DVec2>,
+    pub built_at: Vec<Vector>,
     /// This step's decision, when a stage before the grid (`GhostWalls`, which must
     /// keep or renew its ghosts with the lists) has taken it.
     pub plan: ListPlan,
@@ -223,7 +277,7 @@ impl Neighbours {
         }
         let limit = (0.5 * self.skin).powi(2);
         let (f0, g0) = self.built_at.split_at(fluid.len());
-        let moved = |now: &[Position], then: &[DVec2]| {
+        let moved = |now: &[Position], then: &[Vector]| {
             now.par_chunks(4096)
                 .zip(then.par_chunks(4096))
                 .any(|(a, b)| {
@@ -320,12 +374,12 @@ pub fn require_neighbours(sim: &Sim, stage: &'static str) -> Result<(), SetupErr
 
 /// v at the last half step (leapfrog state), per fluid particle.
 #[derive(Clone, Copy, Debug, Default)]
-pub struct HalfVelocity(pub DVec2);
+pub struct HalfVelocity(pub Vector);
 /// rho at the last half step (leapfrog state), per fluid particle.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct HalfDensity(pub f64);
 
-crate::checkpoint_newtype!(HalfVelocity(DVec2), HalfDensity(f64), Guarded(u8));
+crate::checkpoint_newtype!(HalfVelocity(Vector), HalfDensity(f64), Guarded(u8));
 
 /// What the safeguards outside the model have done to a fluid particle so far in the
 /// run (docs/physics.md, "Safeguards outside the model"): bit flags, [`Guarded::FLOORED`]

@@ -6,7 +6,7 @@
 //! time it uses it (reusing its buffers).
 
 use crate::components::{Wall, WallPose};
-use glam::DVec2;
+use crate::dim::Vector;
 use hecs::{Entity, World};
 
 /// The walls now, in spawn order (see the module docs).
@@ -24,7 +24,7 @@ pub struct Walls {
 }
 
 /// Two walls that meet: an end of one lies on the other (a tank corner, or a piston
-/// standing on the floor).
+/// standing on the floor); in 3D an edge of one lies on the other (a tank's edge).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Corner {
     /// The two walls' indices, `first < second`.
@@ -34,9 +34,13 @@ pub struct Corner {
     /// (inner angle below 180 degrees, e.g. a tank corner): a point behind both lines
     /// near the corner is then outside the fluid.
     pub convex: bool,
-    /// The meeting point is this wall's end `a` (`at_a`) or `b`.
+    /// The meeting point is this wall's end `a` (`at_a`) or `b`; in 3D the meeting
+    /// edge is this wall's edge `edge` ([`WallPose::edge`]).
     end_of: usize,
+    #[cfg(not(feature = "dim3"))]
     at_a: bool,
+    #[cfg(feature = "dim3")]
+    edge: usize,
 }
 
 /// Where a particle has crossed the walls (see [`Walls::crossed`]).
@@ -49,17 +53,23 @@ pub enum Crossing {
     Corner(Corner),
 }
 
-/// A wall's line at an instant with its unit normal and tangent and its length worked
-/// out once, so the per-particle tests (ghost placement, wall crossing) do not
+/// A wall's line (3D: plane rectangle) at an instant with its unit normal and tangents
+/// and its extents worked out once, so the per-particle tests (ghost placement, wall crossing) do not
 /// normalise per call as [`Wall::distance`] does.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct WallLine {
-    pub a: DVec2,
+    pub a: Vector,
     /// Unit normal pointing into the fluid.
-    pub normal: DVec2,
+    pub normal: Vector,
     /// Unit tangent from a to b.
-    pub tangent: DVec2,
+    pub tangent: Vector,
     pub length: f64,
+    /// Unit tangent from a to c (3D).
+    #[cfg(feature = "dim3")]
+    pub across: Vector,
+    /// |c - a| (3D).
+    #[cfg(feature = "dim3")]
+    pub breadth: f64,
 }
 
 impl WallLine {
@@ -69,16 +79,20 @@ impl WallLine {
             normal: w.normal(),
             tangent: w.tangent(),
             length: w.length(),
+            #[cfg(feature = "dim3")]
+            across: w.tangent_across(),
+            #[cfg(feature = "dim3")]
+            breadth: w.breadth(),
         }
     }
     /// Signed distance of `x` from the line, positive on the fluid side.
     #[inline(always)]
-    pub fn distance(&self, x: DVec2) -> f64 {
+    pub fn distance(&self, x: Vector) -> f64 {
         (x - self.a).dot(self.normal)
     }
     /// Abscissa of the projection of `x`, 0 at `a`, `length` at `b`.
     #[inline(always)]
-    pub fn abscissa(&self, x: DVec2) -> f64 {
+    pub fn abscissa(&self, x: Vector) -> f64 {
         (x - self.a).dot(self.tangent)
     }
     /// Whether `x` is behind the wall while alongside it, end points included (it has
@@ -86,13 +100,19 @@ impl WallLine {
     /// corner, or sliding down a wall onto the corner, was behind neither wall there
     /// and left the tank unseen.
     #[inline(always)]
-    pub fn behind(&self, x: DVec2) -> bool {
+    pub fn behind(&self, x: Vector) -> bool {
         let s = self.abscissa(x);
-        self.distance(x) < 0.0 && s >= 0.0 && s <= self.length
+        let alongside = s >= 0.0 && s <= self.length;
+        #[cfg(feature = "dim3")]
+        let alongside = alongside && {
+            let t = (x - self.a).dot(self.across);
+            t >= 0.0 && t <= self.breadth
+        };
+        self.distance(x) < 0.0 && alongside
     }
     /// Mirror image of `x` across the line.
     #[inline(always)]
-    pub fn mirror(&self, x: DVec2) -> DVec2 {
+    pub fn mirror(&self, x: Vector) -> Vector {
         x - 2.0 * self.distance(x) * self.normal
     }
 }
@@ -149,7 +169,8 @@ impl Walls {
         &self.corners
     }
     /// The meeting point of `corner`'s walls where they are now.
-    pub fn corner_point(&self, corner: &Corner) -> DVec2 {
+    #[cfg(not(feature = "dim3"))]
+    pub fn corner_point(&self, corner: &Corner) -> Vector {
         let w = &self.now[corner.end_of];
         if corner.at_a {
             w.a
@@ -158,10 +179,16 @@ impl Walls {
         }
     }
 
+    /// The meeting edge of `corner`'s walls where they are now (its two ends).
+    #[cfg(feature = "dim3")]
+    pub fn corner_edge(&self, corner: &Corner) -> (Vector, Vector) {
+        self.now[corner.end_of].edge(corner.edge)
+    }
+
     /// Whether `x` is on the fluid side of every wall's line (a NaN is not): such a
     /// point has crossed no wall and no corner, since both need it behind a line.
     #[inline]
-    pub fn in_front_of_all(&self, x: DVec2) -> bool {
+    pub fn in_front_of_all(&self, x: Vector) -> bool {
         self.lines.iter().all(|l| l.distance(x) >= 0.0)
     }
 
@@ -169,7 +196,7 @@ impl Walls {
     /// it (end points included), else past a convex corner (behind both lines, within
     /// `reach` of the meeting point); `None` if it has not.
     #[inline]
-    pub fn crossed(&self, x: DVec2, reach: f64) -> Option<Crossing> {
+    pub fn crossed(&self, x: Vector, reach: f64) -> Option<Crossing> {
         if let Some(k) = self.lines.iter().position(|l| l.behind(x)) {
             return Some(Crossing::Wall(k));
         }
@@ -180,13 +207,20 @@ impl Walls {
     }
 
     /// Whether `x` lies behind both lines of the convex `corner`, within `reach` of
-    /// its meeting point.
+    /// its meeting point (3D: edge).
     #[inline]
-    pub fn past_corner(&self, corner: &Corner, x: DVec2, reach: f64) -> bool {
+    pub fn past_corner(&self, corner: &Corner, x: Vector, reach: f64) -> bool {
+        #[cfg(not(feature = "dim3"))]
+        let near = (x - self.corner_point(corner)).length_squared() < reach * reach;
+        #[cfg(feature = "dim3")]
+        let near = {
+            let (p, q) = self.corner_edge(corner);
+            segment_distance_squared(x, p, q) < reach * reach
+        };
         corner.convex
             && self.lines[corner.first].distance(x) < 0.0
             && self.lines[corner.second].distance(x) < 0.0
-            && (x - self.corner_point(corner)).length_squared() < reach * reach
+            && near
     }
 
     /// Reflects a particle at `x` that ended a step behind a wall: its position is
@@ -198,11 +232,11 @@ impl Walls {
     pub fn reflect<const N: usize>(
         &self,
         reach: f64,
-        x: &mut DVec2,
-        mut vs: [&mut DVec2; N],
+        x: &mut Vector,
+        mut vs: [&mut Vector; N],
     ) -> bool {
         let mut hit = false;
-        let mut bounce = |k: usize, x: &mut DVec2| {
+        let mut bounce = |k: usize, x: &mut Vector| {
             let (d, n) = (self.lines[k].distance(*x), self.lines[k].normal);
             let vw = self.now[k].velocity_at(*x - d * n);
             *x -= 2.0 * d * n;
@@ -245,51 +279,101 @@ impl Walls {
     }
 }
 
-/// The pairs of walls where an end of one lies on the other, from the rest geometry,
-/// into `out`.
+/// The pairs of walls where an end (3D: an edge) of one lies on the other, from the
+/// rest geometry, into `out`.
 fn corners_of(walls: impl Iterator<Item = WallPose> + Clone, out: &mut Vec<Corner>) {
-    let on = |p: DVec2, w: &WallPose| {
+    let on = |p: Vector, w: &WallPose| {
         let s = w.abscissa(p);
-        w.distance(p).abs() < 1e-9 && s > -1e-9 && s < w.length() + 1e-9
+        let alongside = s > -1e-9 && s < w.length() + 1e-9;
+        #[cfg(feature = "dim3")]
+        let alongside = alongside && {
+            let t = w.abscissa_across(p);
+            t > -1e-9 && t < w.breadth() + 1e-9
+        };
+        w.distance(p).abs() < 1e-9 && alongside
     };
     out.clear();
     for (i, u) in walls.clone().enumerate() {
         for (j, v) in walls.clone().enumerate().skip(i + 1) {
             let (u, v) = (&u, &v);
-            // The meeting point: an end of one wall lying on the other.
-            let ends = [
-                (i, true, u.a, v),
-                (i, false, u.b, v),
-                (j, true, v.a, u),
-                (j, false, v.b, u),
-            ];
-            let Some(&(end_of, at_a, meet, _)) = ends.iter().find(|(_, _, p, w)| on(*p, w)) else {
-                continue;
-            };
-            // Convex when each wall's far end is on the other's fluid side.
-            let far = |w: &WallPose| {
-                if (w.a - meet).length() > (w.b - meet).length() {
-                    w.a
-                } else {
-                    w.b
+            #[cfg(not(feature = "dim3"))]
+            {
+                // The meeting point: an end of one wall lying on the other.
+                let ends = [
+                    (i, true, u.a, v),
+                    (i, false, u.b, v),
+                    (j, true, v.a, u),
+                    (j, false, v.b, u),
+                ];
+                let Some(&(end_of, at_a, meet, _)) = ends.iter().find(|(_, _, p, w)| on(*p, w))
+                else {
+                    continue;
+                };
+                // Convex when each wall's far end is on the other's fluid side.
+                let far = |w: &WallPose| {
+                    if (w.a - meet).length() > (w.b - meet).length() {
+                        w.a
+                    } else {
+                        w.b
+                    }
+                };
+                let convex = u.distance(far(v)) > 0.0 && v.distance(far(u)) > 0.0;
+                out.push(Corner {
+                    first: i,
+                    second: j,
+                    convex,
+                    end_of,
+                    at_a,
+                });
+            }
+            #[cfg(feature = "dim3")]
+            {
+                // The meeting edge: an edge of one wall lying on the other (both ends),
+                // the walls not parallel.
+                if u.normal().cross(v.normal()).length_squared() < 1e-18 {
+                    continue;
                 }
-            };
-            let convex = u.distance(far(v)) > 0.0 && v.distance(far(u)) > 0.0;
-            out.push(Corner {
-                first: i,
-                second: j,
-                convex,
-                end_of,
-                at_a,
-            });
+                let meeting = (0..4)
+                    .map(|e| (i, e, u.edge(e), v))
+                    .chain((0..4).map(|e| (j, e, v.edge(e), u)));
+                let Some((end_of, edge, _, _)) = meeting
+                    .clone()
+                    .find(|(_, _, (p, q), w)| on(*p, w) && on(*q, w))
+                else {
+                    continue;
+                };
+                // Convex when each wall's centre is on the other's fluid side.
+                let convex = u.distance(v.centre()) > 0.0 && v.distance(u.centre()) > 0.0;
+                out.push(Corner {
+                    first: i,
+                    second: j,
+                    convex,
+                    end_of,
+                    edge,
+                });
+            }
         }
     }
 }
 
-#[cfg(test)]
+/// The squared distance from `x` to the segment p-q (3D corners' edges).
+#[cfg(feature = "dim3")]
+fn segment_distance_squared(x: Vector, p: Vector, q: Vector) -> f64 {
+    let d = q - p;
+    let len2 = d.length_squared();
+    let s = if len2 > 0.0 {
+        ((x - p).dot(d) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (x - (p + s * d)).length_squared()
+}
+
+#[cfg(all(test, not(feature = "dim3")))]
 mod tests {
     use super::*;
     use crate::motion::Pose;
+    use glam::DVec2;
 
     fn wall(name: &str, a: (f64, f64), b: (f64, f64)) -> Wall {
         Wall {
@@ -406,5 +490,96 @@ mod tests {
         // A quarter period: swayed by the full amplitude.
         assert!((set.now()[0].a - DVec2::new(0.1, 1.0)).length() < 1e-12);
         assert!((set.lines()[2].a - DVec2::new(1.1, 0.0)).length() < 1e-12);
+    }
+}
+
+/// The 3D walls: planes with edges (`corner_edge`) where 2D has corner points.
+#[cfg(all(test, feature = "dim3"))]
+mod tests3d {
+    use super::*;
+    use crate::motion::Pose;
+
+    fn wall(name: &str, a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> Wall {
+        Wall {
+            name: name.into(),
+            a: a.into(),
+            b: b.into(),
+            c: c.into(),
+            body: Pose::default(),
+        }
+    }
+
+    /// An open 1 m box tank: floor, left, right, back (z = 0), front (z = 1), each
+    /// with (c - a) x (b - a) pointing into the water.
+    fn tank() -> World {
+        let mut world = World::new();
+        for w in [
+            wall("bottom", [0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]),
+            wall("left", [0.0, 1.0, 0.0], [0.0, 0.0, 0.0], [0.0, 1.0, 1.0]),
+            wall("right", [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [1.0, 0.0, 1.0]),
+            wall("back", [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]),
+            wall("front", [0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, 1.0, 1.0]),
+        ] {
+            let now = w.at_rest();
+            world.spawn((w, now));
+        }
+        world
+    }
+
+    #[test]
+    fn the_walls_face_the_water_and_meet_at_eight_convex_edges() {
+        let set = Walls::of(&tank());
+        let inside = Vector::splat(0.5);
+        for (k, line) in set.lines().iter().enumerate() {
+            assert!((line.distance(inside) - 0.5).abs() < 1e-15, "wall {k}");
+        }
+        let c = set.corners();
+        // Floor with each side, left and right with back and front; the parallel
+        // pairs do not meet.
+        assert_eq!(c.len(), 8, "{c:?}");
+        assert!(c.iter().all(|c| c.convex));
+        let (p, q) = set.corner_edge(&c[0]);
+        assert_eq!((c[0].first, c[0].second), (0, 1));
+        let ends = [p, q].map(|v| v.to_array());
+        assert!(
+            ends.contains(&[0.0, 0.0, 0.0]) && ends.contains(&[0.0, 0.0, 1.0]),
+            "{ends:?}"
+        );
+    }
+
+    #[test]
+    fn a_point_past_an_edge_or_behind_a_wall_has_crossed() {
+        let world = tank();
+        let set = Walls::of(&world);
+        let reach = 0.1;
+        assert_eq!(set.crossed(Vector::splat(0.5), reach), None);
+        assert_eq!(set.crossed(Vector::ZERO, reach), None);
+        assert_eq!(
+            set.crossed(Vector::new(0.5, -1e-6, 0.5), reach),
+            Some(Crossing::Wall(0))
+        );
+        assert_eq!(
+            set.crossed(Vector::new(0.5, 0.5, 1.0 + 1e-6), reach),
+            Some(Crossing::Wall(4))
+        );
+        let out = set.crossed(Vector::new(-1e-6, -1e-6, 0.5), reach);
+        assert!(matches!(out, Some(Crossing::Corner(c)) if (c.first, c.second) == (0, 1)));
+        assert_eq!(
+            set.describe(&world, out.unwrap()),
+            "the corner of walls `bottom` and `left`"
+        );
+        // Beyond the reach of the edge: left to the domain check.
+        assert_eq!(set.crossed(Vector::new(-0.5, -0.5, 0.5), reach), None);
+    }
+
+    #[test]
+    fn a_particle_behind_the_floor_is_reflected_with_its_velocity() {
+        let set = Walls::of(&tank());
+        let (mut x, mut v) = (Vector::new(0.5, -0.01, 0.25), Vector::new(0.2, -1.0, 0.3));
+        assert!(set.reflect(0.1, &mut x, [&mut v]));
+        assert!((x - Vector::new(0.5, 0.01, 0.25)).length() < 1e-15, "{x}");
+        assert!((v - Vector::new(0.2, 1.0, 0.3)).length() < 1e-15, "{v}");
+        let mut inside = Vector::splat(0.5);
+        assert!(!set.reflect(0.1, &mut inside, [&mut v]));
     }
 }

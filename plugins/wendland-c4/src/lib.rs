@@ -1,8 +1,9 @@
-//! An example plugin kernel: the Wendland C4 kernel in 2D (Wendland 1995; Dehnen &
+//! An example plugin kernel: the Wendland C4 kernel (Wendland 1995; Dehnen &
 //! Aly 2012, table 1), which a scenario selects as `kernel: WendlandC4` once the
 //! registry knows it:
 //!
-//!   W(r, h) = 9 / (4 pi h^2) (1 - q/2)^6 (35/12 q^2 + 3 q + 1),   q = r/h <= 2.
+//!   W(r, h) = 9 / (4 pi h^2) (1 - q/2)^6 (35/12 q^2 + 3 q + 1),   q = r/h <= 2
+//! in 2D, and 495 / (256 pi h^3) times the same shape in 3D.
 //!
 //! Smoother than the shipped Wendland C2 (two more continuous derivatives), it resists
 //! pairing at larger h/ds (Dehnen & Aly 2012). Written once over the lane type, as a
@@ -21,6 +22,8 @@ pub struct WendlandC4;
 impl KernelShape for WendlandC4 {
     /// 9 / (4 pi): W integrates to 1 over the plane (tested).
     const NORM: f64 = 9.0 / (4.0 * PI);
+    /// 495 / (256 pi): W integrates to 1 over space (tested).
+    const NORM_3D: f64 = 495.0 / (256.0 * PI);
     const SUPPORT: f64 = 2.0;
     /// (1 - q/2)^6 (35/12 q^2 + 3 q + 1).
     #[inline(always)]

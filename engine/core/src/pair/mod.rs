@@ -19,9 +19,25 @@
 /// fields are wanted and their offsets are constants and `Pair`'s fields stay in
 /// registers. A counted loop of twelve was past the compiler's unrolling: the pair
 /// sums took 20-35 % longer when the field count went from ten to twelve.
+#[cfg(not(feature = "dim3"))]
 macro_rules! each_field {
     (|$f:ident| $body:expr) => {
         each_field!(@ $f, $body, 0 1 2 3 4 5 6 7 8 9 10 11)
+    };
+    (@ $f:ident, $body:expr, $($k:literal)*) => {{
+        const _: () = assert!(Field::COUNT == [$($k),*].len());
+        $({
+            let $f: usize = $k;
+            $body;
+        })*
+    }};
+}
+
+/// The same for the fourteen fields of the 3D build.
+#[cfg(feature = "dim3")]
+macro_rules! each_field {
+    (|$f:ident| $body:expr) => {
+        each_field!(@ $f, $body, 0 1 2 3 4 5 6 7 8 9 10 11 12 13)
     };
     (@ $f:ident, $body:expr, $($k:literal)*) => {{
         const _: () = assert!(Field::COUNT == [$($k),*].len());
@@ -44,6 +60,8 @@ pub use columns::{ColumnError, ColumnKey, Columns, Scope};
 pub use lane::{whole_pow, Lane};
 pub(crate) use plugin::{shape, shape_fn};
 pub use plugin::{NoTerms, PluginTerm, ShapeFn, WithPlugins};
+#[cfg(feature = "dim3")]
+pub use rates::SHARE_AZ;
 pub use rates::{EquationsOfMotion, RateSums, RateTerm, Rates, SHARE_AX, SHARE_AY, SHARE_DRHO};
 pub use record::{Field, Fields, Records};
 
@@ -227,6 +245,9 @@ impl Me {
 pub struct Pair<L: Lane> {
     pub dx: L,
     pub dy: L,
+    /// x_ij's z component (3D).
+    #[cfg(feature = "dim3")]
+    pub dz: L,
     pub r: L,
     pub q: L,
     /// W(r_ij).
@@ -234,6 +255,9 @@ pub struct Pair<L: Lane> {
     /// grad_i W_ij = x_ij (dW/dr)/r.
     pub gx: L,
     pub gy: L,
+    /// grad_i W_ij's z component (3D).
+    #[cfg(feature = "dim3")]
+    pub gz: L,
     fields: [L; Field::COUNT],
 }
 
@@ -253,6 +277,42 @@ impl<L: Lane> Pair<L> {
             me.lanes::<L>(Field::Vy) - self.j(Field::Vy),
         )
     }
+
+    /// x_ij = x_i - x_j by component, in any dimension.
+    #[inline(always)]
+    pub fn x_ij(&self) -> [L; crate::dim::DIM] {
+        #[cfg(not(feature = "dim3"))]
+        return [self.dx, self.dy];
+        #[cfg(feature = "dim3")]
+        return [self.dx, self.dy, self.dz];
+    }
+
+    /// grad_i W_ij by component, in any dimension.
+    #[inline(always)]
+    pub fn grad(&self) -> [L; crate::dim::DIM] {
+        #[cfg(not(feature = "dim3"))]
+        return [self.gx, self.gy];
+        #[cfg(feature = "dim3")]
+        return [self.gx, self.gy, self.gz];
+    }
+
+    /// v_ij = v_i - v_j by component, in any dimension (the term must read the
+    /// velocity, [`Field::VELOCITY`]).
+    #[inline(always)]
+    pub fn velocity_ij(&self, me: &Me) -> [L; crate::dim::DIM] {
+        Field::VELOCITY.map(|f| me.lanes::<L>(f) - self.j(f))
+    }
+}
+
+/// a . b of two vectors of lanes, the components added in order (x first), as the 2D
+/// terms write `ax * bx + ay * by`.
+#[inline(always)]
+pub fn dot<L: Lane>(a: [L; crate::dim::DIM], b: [L; crate::dim::DIM]) -> L {
+    let mut sum = a[0] * b[0];
+    for k in 1..crate::dim::DIM {
+        sum = sum + a[k] * b[k];
+    }
+    sum
 }
 
 /// A sum over a particle's neighbours, written once over the lane type.
@@ -302,8 +362,9 @@ pub trait PairTerm: Sync + Clone {
     }
 }
 
-/// Slots of a neighbour's [`Share`].
-pub const SHARE: usize = 4;
+/// Slots of a neighbour's [`Share`]: four in 2D (one 256-bit add per neighbour),
+/// eight in 3D (dv/dt's third component needs a fifth).
+pub const SHARE: usize = 4 * (crate::dim::DIM - 1);
 
 /// Neighbour j's share of a group of pairs, in lanes (lane l for neighbour l of the
 /// group): the values added to j's own sums, [`SHARE`] slots whose meaning is the
@@ -567,6 +628,8 @@ impl<'a, T: PairTerm, K: Kernel> Pass<'a, T, K> {
         }
         let (base, stride, len) = (rec.base(), rec.stride(), rec.len());
         let (xi, yi) = (L::splat(me.get(Field::X)), L::splat(me.get(Field::Y)));
+        #[cfg(feature = "dim3")]
+        let zi = L::splat(me.get(Field::Z));
         let inv_h = L::splat(k.inv_h());
         // A copy of the term in the loop's own frame, so that its parameters (and the
         // composite's choice of terms) are plain values there, not loads through
@@ -605,17 +668,26 @@ impl<'a, T: PairTerm, K: Kernel> Pass<'a, T, K> {
                 xi - fields[Field::X as usize],
                 yi - fields[Field::Y as usize],
             );
+            #[cfg(not(feature = "dim3"))]
             let r = (dx * dx + dy * dy).sqrt();
+            #[cfg(feature = "dim3")]
+            let dz = zi - fields[Field::Z as usize];
+            #[cfg(feature = "dim3")]
+            let r = (dx * dx + dy * dy + dz * dz).sqrt();
             let q = r * inv_h;
             let f = k.grad_factor_at(q, r);
             let p = Pair {
                 dx,
                 dy,
+                #[cfg(feature = "dim3")]
+                dz,
                 r,
                 q,
                 w: k.w_at(q),
                 gx: dx * f,
                 gy: dy * f,
+                #[cfg(feature = "dim3")]
+                gz: dz * f,
                 fields,
             };
             if let (true, Some(shares)) = (BOTH, shares.as_deref_mut()) {

@@ -3,7 +3,7 @@
 //! one neighbour loop ([`EquationsOfMotion`]).
 
 use super::{Field, Fields, Lane, Layouts, Me, Pair, PairTerm, Share, SHARE};
-use glam::DVec2;
+use crate::dim::Vector;
 
 /// One particle's rates in lanes, summed over its neighbours.
 #[derive(Clone, Copy)]
@@ -16,6 +16,8 @@ pub struct Rates<L> {
     /// dv_i/dt, other than through `coef` [m/s^2].
     pub ax: L,
     pub ay: L,
+    #[cfg(feature = "dim3")]
+    pub az: L,
     /// d rho_i/dt [kg/m^3/s].
     pub drho: L,
     /// The viscous dissipation rate of particle i's pairs, P_i, such that the flow
@@ -35,6 +37,8 @@ impl<L: Lane> Rates<L> {
             coef: z,
             ax: z,
             ay: z,
+            #[cfg(feature = "dim3")]
+            az: z,
             drho: z,
             power: z,
             diffusion: z,
@@ -70,16 +74,19 @@ pub trait RateTerm: Sync {
 }
 
 /// The slots of a neighbour's [`super::Share`] in a pass of [`EquationsOfMotion`]:
-/// dv_j/dt (x and y) and d rho_j/dt (density diffusion included).
+/// dv_j/dt (x and y, and z in 3D, after the count's slot 3) and d rho_j/dt (density
+/// diffusion included).
 pub const SHARE_AX: usize = 0;
 pub const SHARE_AY: usize = 1;
 pub const SHARE_DRHO: usize = 2;
+#[cfg(feature = "dim3")]
+pub const SHARE_AZ: usize = 4;
 
 /// One particle's rates, summed.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct RateSums {
     /// dv_i/dt from the pair terms (gravity not included) [m/s^2].
-    pub acc: DVec2,
+    pub acc: Vector,
     /// d rho_i/dt [kg/m^3/s].
     pub drho: f64,
     /// Particle i's share of the dissipation rate, (1/2) m_i P_i (see
@@ -138,6 +145,10 @@ impl<R: RateTerm + Clone> PairTerm for EquationsOfMotion<R> {
             let mt = p.j(Field::Mass) * r.coef;
             r.ax = r.ax - mt * p.gx;
             r.ay = r.ay - mt * p.gy;
+            #[cfg(feature = "dim3")]
+            {
+                r.az = r.az - mt * p.gz;
+            }
         }
     }
 
@@ -146,7 +157,10 @@ impl<R: RateTerm + Clone> PairTerm for EquationsOfMotion<R> {
         let r = acc.0;
         let diffusion = r.diffusion.sum();
         RateSums {
-            acc: DVec2::new(r.ax.sum(), r.ay.sum()),
+            #[cfg(not(feature = "dim3"))]
+            acc: Vector::new(r.ax.sum(), r.ay.sum()),
+            #[cfg(feature = "dim3")]
+            acc: Vector::new(r.ax.sum(), r.ay.sum(), r.az.sum()),
             drho: r.drho.sum() + diffusion,
             power: 0.5 * me.get(Field::Mass) * r.power.sum(),
             diffusion: me.get(Field::Mass) * me.get(Field::PRho2) * diffusion,
@@ -172,6 +186,11 @@ impl<R: RateTerm + Clone> PairTerm for EquationsOfMotion<R> {
             let mi = me.lanes::<L>(Field::Mass) * r.coef;
             rj.ax = rj.ax + mi * p.gx;
             rj.ay = rj.ay + mi * p.gy;
+            #[cfg(feature = "dim3")]
+            {
+                r.az = r.az - mt * p.gz;
+                rj.az = rj.az + mi * p.gz;
+            }
         }
         let mj = p.j(Field::Mass);
         e.power = e.power + mj * rj.power;
@@ -180,6 +199,10 @@ impl<R: RateTerm + Clone> PairTerm for EquationsOfMotion<R> {
         share[SHARE_AX] = rj.ax;
         share[SHARE_AY] = rj.ay;
         share[SHARE_DRHO] = rj.drho + rj.diffusion;
+        #[cfg(feature = "dim3")]
+        {
+            share[SHARE_AZ] = rj.az;
+        }
         share
     }
 

@@ -11,10 +11,10 @@
 
 use super::columns::Columns;
 use crate::components::{Density, Mass, Position, Pressure, Velocity};
+use crate::dim::Vector;
 use crate::sim::Tait;
 use crate::stage::StepError;
 use crate::world::Particles;
-use glam::DVec2;
 use rayon::prelude::*;
 
 /// A particle quantity a pair term can read from the packed records.
@@ -25,10 +25,16 @@ pub enum Field {
     X,
     /// Position y [m].
     Y,
+    /// Position z [m] (3D).
+    #[cfg(feature = "dim3")]
+    Z,
     /// Velocity, x [m/s].
     Vx,
     /// Velocity, y [m/s].
     Vy,
+    /// Velocity, z [m/s] (3D).
+    #[cfg(feature = "dim3")]
+    Vz,
     /// Density rho [kg/m^3].
     Rho,
     /// Mass m [kg].
@@ -54,8 +60,9 @@ impl Field {
         self as u8 >= Field::Slot0 as u8
     }
     /// How many fields there are.
-    pub const COUNT: usize = 12;
+    pub const COUNT: usize = 8 + 2 * crate::dim::DIM;
     /// Every field, in record order.
+    #[cfg(not(feature = "dim3"))]
     pub const ALL: [Field; Field::COUNT] = [
         Field::X,
         Field::Y,
@@ -70,19 +77,49 @@ impl Field {
         Field::Slot2,
         Field::Slot3,
     ];
-    /// The keyed columns' slots.
-    pub const SLOTS: [Field; 4] = [Field::Slot0, Field::Slot1, Field::Slot2, Field::Slot3];
-    /// What the momentum equation's terms read: one 64-byte record.
-    pub const MOMENTUM: [Field; 8] = [
+    /// Every field, in record order.
+    #[cfg(feature = "dim3")]
+    pub const ALL: [Field; Field::COUNT] = [
         Field::X,
         Field::Y,
+        Field::Z,
         Field::Vx,
         Field::Vy,
+        Field::Vz,
         Field::Rho,
         Field::Mass,
         Field::PRho2,
         Field::Sound,
+        Field::Slot0,
+        Field::Slot1,
+        Field::Slot2,
+        Field::Slot3,
     ];
+    /// The keyed columns' slots.
+    pub const SLOTS: [Field; 4] = [Field::Slot0, Field::Slot1, Field::Slot2, Field::Slot3];
+    /// The position's components.
+    #[cfg(not(feature = "dim3"))]
+    pub const POSITION: [Field; crate::dim::DIM] = [Field::X, Field::Y];
+    /// The position's components.
+    #[cfg(feature = "dim3")]
+    pub const POSITION: [Field; crate::dim::DIM] = [Field::X, Field::Y, Field::Z];
+    /// The velocity's components.
+    #[cfg(not(feature = "dim3"))]
+    pub const VELOCITY: [Field; crate::dim::DIM] = [Field::Vx, Field::Vy];
+    /// The velocity's components.
+    #[cfg(feature = "dim3")]
+    pub const VELOCITY: [Field; crate::dim::DIM] = [Field::Vx, Field::Vy, Field::Vz];
+    /// What the momentum equation's terms read, every field but the slots: one
+    /// 64-byte record in 2D (eight fields); in 3D ten, a 128-byte record.
+    pub const MOMENTUM: [Field; Field::COUNT - 4] = {
+        let mut m = [Field::X; Field::COUNT - 4];
+        let mut k = 0;
+        while k < m.len() {
+            m[k] = Field::ALL[k];
+            k += 1;
+        }
+        m
+    };
 }
 
 /// A set of [`Field`]s.
@@ -92,7 +129,12 @@ pub struct Fields(pub(crate) u16);
 impl Fields {
     /// What every pass packs: the geometry and the mass (the padding lanes of a group
     /// are a particle of zero mass).
+    #[cfg(not(feature = "dim3"))]
     pub const GEOMETRY: Fields = Fields::of(&[Field::X, Field::Y, Field::Mass]);
+    /// What every pass packs: the geometry and the mass (the padding lanes of a group
+    /// are a particle of zero mass).
+    #[cfg(feature = "dim3")]
+    pub const GEOMETRY: Fields = Fields::of(&[Field::X, Field::Y, Field::Z, Field::Mass]);
 
     /// The set of `list`.
     pub const fn of(list: &[Field]) -> Fields {
@@ -316,7 +358,7 @@ impl Records {
         // A ghosts-only column's fluid values come from the fluid's own fields.
         let own = |f: Field| slots.iter().flatten().any(|s| s.fluid_reads(f));
         let wants = |f: &[Field]| f.iter().any(|&f| fields.contains(f) || own(f));
-        let v = match wants(&[Field::Vx, Field::Vy]) {
+        let v = match wants(&Field::VELOCITY) {
             true => Some(particles.joined::<Velocity>()?),
             false => None,
         };
@@ -357,12 +399,14 @@ impl Records {
                     let j = (c * PACK_CHUNK + k) as u32;
                     // j's world fields, in `Field` order (0 where not read).
                     let (xj, rhoj) = (x.get(j).0, rho.get(j).0);
-                    let vj = v.as_ref().map_or(DVec2::ZERO, |v| v.get(j).0);
+                    let vj = v.as_ref().map_or(Vector::ZERO, |v| v.get(j).0);
                     let mut base = [0.0; Field::COUNT];
-                    base[Field::X as usize] = xj.x;
-                    base[Field::Y as usize] = xj.y;
-                    base[Field::Vx as usize] = vj.x;
-                    base[Field::Vy as usize] = vj.y;
+                    for (k, f) in Field::POSITION.into_iter().enumerate() {
+                        base[f as usize] = xj[k];
+                    }
+                    for (k, f) in Field::VELOCITY.into_iter().enumerate() {
+                        base[f as usize] = vj[k];
+                    }
                     base[Field::Rho as usize] = rhoj;
                     base[Field::Mass as usize] = m.get(j).0;
                     if let Some(p) = &p {

@@ -2,6 +2,7 @@
 
 use super::*;
 use crate::components::{Density, Fluid, Ghost, Mass, Position, Pressure, Velocity};
+use crate::dim::{self, Vector, DIM};
 use crate::kernel::{KernelKind, Wendland};
 use crate::sim::Tait;
 use crate::world::Particles;
@@ -15,20 +16,17 @@ impl PairTerm for Probe {
     type Acc<L: Lane> = [L; 3];
     type Out = [f64; 3];
     fn reads(&self) -> Fields {
-        Fields::of(&[Field::Vx, Field::Vy, Field::PRho2])
+        Fields::of(&Field::VELOCITY).with(Fields::of(&[Field::PRho2]))
     }
     fn zero<L: Lane>(&self) -> [L; 3] {
         [L::zero(); 3]
     }
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, acc: &mut [L; 3]) {
         let m = p.j(Field::Mass);
-        let (wx, wy) = (
-            me.lanes::<L>(Field::Vx) - p.j(Field::Vx),
-            me.lanes::<L>(Field::Vy) - p.j(Field::Vy),
-        );
+        let (v, g) = (p.velocity_ij(me), p.grad());
         acc[0] = acc[0] + m * p.w;
-        acc[1] = acc[1] + m * (wx * p.gx + wy * p.gy);
-        acc[2] = acc[2] + m * p.j(Field::PRho2) * (p.gx * p.gx + p.gy * p.gy).sqrt();
+        acc[1] = acc[1] + m * dot(v, g);
+        acc[2] = acc[2] + m * p.j(Field::PRho2) * dot(g, g).sqrt();
     }
     fn finish<L: Lane>(&self, _: &Me, acc: [L; 3]) -> [f64; 3] {
         acc.map(L::sum)
@@ -48,22 +46,47 @@ fn world(seed: u64) -> hecs::World {
         (state >> 11) as f64 / (1u64 << 53) as f64
     };
     let mut world = hecs::World::new();
-    for a in 0..9 {
-        for b in 0..9 {
-            let rho = 1000.0 * (0.97 + 0.06 * next());
-            let x = DVec2::new(a as f64, b as f64) * 0.01
-                + 0.003 * DVec2::new(next() - 0.5, next() - 0.5);
-            let v = DVec2::new(next() - 0.5, next() - 0.5);
-            let p = Pressure(2000.0 * (next() - 0.3));
-            let c = (Position(x), Velocity(v), Density(rho), Mass(0.1), p);
-            if b == 0 {
-                world.spawn((Ghost { source: 0 }, c.0, c.1, c.2, c.3, c.4));
-            } else {
-                world.spawn((Fluid, c.0, c.1, c.2, c.3, c.4));
+    // One layer in 2D; four along z in 3D (the z components drawn after the others).
+    for layer in 0..if DIM == 2 { 1 } else { 4 } {
+        for a in 0..9 {
+            for b in 0..9 {
+                let rho = 1000.0 * (0.97 + 0.06 * next());
+                let mut x = dim::xy(a as f64, b as f64) * 0.01
+                    + 0.003 * dim::xy(next() - 0.5, next() - 0.5);
+                let mut v = dim::xy(next() - 0.5, next() - 0.5);
+                if DIM == 3 {
+                    x[DIM - 1] = 0.01 * layer as f64 + 0.003 * (next() - 0.5);
+                    v[DIM - 1] = next() - 0.5;
+                }
+                let p = Pressure(2000.0 * (next() - 0.3));
+                let c = (Position(x), Velocity(v), Density(rho), Mass(0.1), p);
+                if b == 0 {
+                    world.spawn((Ghost { source: 0 }, c.0, c.1, c.2, c.3, c.4));
+                } else {
+                    world.spawn((Fluid, c.0, c.1, c.2, c.3, c.4));
+                }
             }
         }
     }
     world
+}
+
+/// Record `j`'s position.
+fn position(r: &Records, j: usize) -> Vector {
+    let mut x = Vector::ZERO;
+    for (k, f) in Field::POSITION.into_iter().enumerate() {
+        x[k] = r.get(j, f);
+    }
+    x
+}
+
+/// Record `j`'s velocity.
+fn velocity(r: &Records, j: usize) -> Vector {
+    let mut v = Vector::ZERO;
+    for (k, f) in Field::VELOCITY.into_iter().enumerate() {
+        v[k] = r.get(j, f);
+    }
+    v
 }
 
 fn eos() -> Tait {
@@ -78,12 +101,9 @@ fn packed(world: &hecs::World, fields: Fields) -> Records {
 }
 
 fn neighbours(r: &Records, i: usize, h: f64) -> Vec<u32> {
-    let xi = DVec2::new(r.get(i, Field::X), r.get(i, Field::Y));
+    let xi = position(r, i);
     (0..r.len() as u32)
-        .filter(|&j| {
-            let xj = DVec2::new(r.get(j as usize, Field::X), r.get(j as usize, Field::Y));
-            j as usize != i && (xi - xj).length() < 2.0 * h
-        })
+        .filter(|&j| j as usize != i && (xi - position(r, j as usize)).length() < 2.0 * h)
         .collect()
 }
 
@@ -104,12 +124,11 @@ fn every_instruction_set_sums_the_same_terms() {
                 .unwrap()
                 .sum(i, &js);
             let mut plain = [0.0; 3];
-            let xi = DVec2::new(r.get(i, Field::X), r.get(i, Field::Y));
-            let vi = DVec2::new(r.get(i, Field::Vx), r.get(i, Field::Vy));
+            let (xi, vi) = (position(&r, i), velocity(&r, i));
             for &j in &js {
                 let j = j as usize;
-                let xij = xi - DVec2::new(r.get(j, Field::X), r.get(j, Field::Y));
-                let vij = vi - DVec2::new(r.get(j, Field::Vx), r.get(j, Field::Vy));
+                let xij = xi - position(&r, j);
+                let vij = vi - velocity(&r, j);
                 let g = k.grad(xij, xij.length());
                 let m = r.get(j, Field::Mass);
                 plain[0] += m * k.w(xij.length());
@@ -366,7 +385,9 @@ const GHOST_VELOCITY: Scope = Scope::Ghosts {
 
 /// The packer puts each keyed column's values in its slots, record by record: a
 /// per-particle column as given, a ghosts-only one after the fluid, with the fluid's
-/// slots holding the fields its scope names (here the velocity).
+/// slots holding the fields its scope names (here the velocity). 2D: keyed vector
+/// columns hold two components (docs/architecture.md, "Two and three dimensions").
+#[cfg(not(feature = "dim3"))]
 #[test]
 fn keyed_columns_are_packed_into_their_slots() {
     let w = world(7);
@@ -499,7 +520,9 @@ fn a_missing_or_stale_column_is_refused() {
 }
 
 /// A key with three slots: refused (a column is a scalar or a vector).
+#[cfg(not(feature = "dim3"))]
 struct ThreeSlots;
+#[cfg(not(feature = "dim3"))]
 impl ColumnKey for ThreeSlots {
     const NAME: &'static str = "ThreeSlots";
     const SLOTS: &'static [Field] = &[Field::Slot0, Field::Slot1, Field::Slot2];
@@ -507,7 +530,8 @@ impl ColumnKey for ThreeSlots {
 
 /// A pass that reads only a ghosts-only column's slots still gets the fluid's own
 /// fields there (the packer reads the velocity for it though the pass does not), and
-/// the store's accessors see what was stored.
+/// the store's accessors see what was stored. 2D, as above.
+#[cfg(not(feature = "dim3"))]
 #[test]
 fn a_ghost_column_alone_carries_the_fluids_own_fields() {
     let w = world(11);
@@ -545,4 +569,95 @@ fn a_ghost_column_alone_carries_the_fluids_own_fields() {
             ..
         })
     ));
+}
+
+/// A symmetric test term: i sums m_j W_ij, and gives neighbour j, in every slot k of
+/// its share, m_i W_ij (k + 1) x_ij[k mod DIM], so that each slot of each lane has a
+/// value of its own.
+#[derive(Clone)]
+struct Shared;
+
+impl PairTerm for Shared {
+    type Acc<L: Lane> = L;
+    type Out = f64;
+    fn reads(&self) -> Fields {
+        Fields::GEOMETRY
+    }
+    fn zero<L: Lane>(&self) -> L {
+        L::zero()
+    }
+    fn pair<L: Lane>(&self, _: &Me, p: &Pair<L>, acc: &mut L) {
+        *acc = *acc + p.j(Field::Mass) * p.w;
+    }
+    fn finish<L: Lane>(&self, _: &Me, acc: L) -> f64 {
+        acc.sum()
+    }
+    const SYMMETRIC: bool = true;
+    fn pair_both<L: Lane>(&self, me: &Me, p: &Pair<L>, acc: &mut L) -> Share<L> {
+        self.pair(me, p, acc);
+        let (x, mw) = (p.x_ij(), me.lanes::<L>(Field::Mass) * p.w);
+        std::array::from_fn(|k| mw * L::splat((k + 1) as f64) * x[k % DIM])
+    }
+}
+
+/// Each pair once (`Pass::sum_both`): i's own sum is the whole-list sum over its
+/// upper neighbours, and every neighbour's record receives exactly the shares the
+/// plain loop gives it, slot by slot, on every instruction set (to round-off:
+/// relative 1e-12, the same terms in another order; the SIMD sets bit for bit alike),
+/// groups shorter than eight included. In 3D a share has two quads of slots, which the
+/// SIMD scatters transpose one after the other.
+#[test]
+fn each_pair_once_hands_every_slot_to_its_neighbour() {
+    let h = 0.013;
+    let k = Wendland::new(h);
+    let w = world(5);
+    let r = packed(&w, Fields::GEOMETRY);
+    let n = r.len();
+    let mut results: Vec<Vec<[f64; SHARE]>> = Vec::new();
+    for isa in [Isa::SCALAR].into_iter().chain(Isa::available()) {
+        let pass = Pass::with_isa(&Shared, k, &r, isa).unwrap();
+        let mut records = vec![[0.0; SHARE]; n];
+        let mut plain = vec![[0.0; SHARE]; n];
+        for i in 0..n {
+            let upper: Vec<u32> = neighbours(&r, i, h)
+                .into_iter()
+                .filter(|&j| j as usize > i)
+                .collect();
+            let mut shares = Shares {
+                start: 0,
+                records: &mut records,
+            };
+            let own = pass.sum_both(i, &upper, &mut shares);
+            let whole = pass.sum(i, &upper);
+            assert!(
+                (own - whole).abs() <= 1e-12 * whole.abs().max(1e-3),
+                "{isa:?} {i}"
+            );
+            for &j in &upper {
+                let j = j as usize;
+                let x = position(&r, i) - position(&r, j);
+                let mw = r.get(i, Field::Mass) * k.w(x.length());
+                for s in 0..SHARE {
+                    plain[j][s] += mw * (s + 1) as f64 * x[s % DIM];
+                }
+            }
+        }
+        for j in 0..n {
+            for s in 0..SHARE {
+                let (got, want) = (records[j][s], plain[j][s]);
+                assert!(
+                    (got - want).abs() <= 1e-12 * want.abs().max(1e-3),
+                    "{isa:?}: record {j} slot {s}: {got} against {want}"
+                );
+            }
+        }
+        results.push(records);
+    }
+    for simd in results.iter().skip(2) {
+        assert!(simd
+            .iter()
+            .flatten()
+            .zip(results[1].iter().flatten())
+            .all(|(a, b)| a.to_bits() == b.to_bits()));
+    }
 }

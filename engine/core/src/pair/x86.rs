@@ -204,34 +204,37 @@ impl Gather for Avx512 {
     /// (four unpacks, four two-source permutes), each added to its record whole.
     #[inline(always)]
     unsafe fn scatter(js: &[u32], share: &Share<Self>, shares: &mut Shares) {
-        const _: () = assert!(SHARE == 4);
+        const _: () = assert!(SHARE.is_multiple_of(4));
         debug_assert!((1..=8).contains(&js.len()));
-        let [a, b, c, d] = share.map(|v| v.0);
-        // SAFETY: the features (caller); each record written is checked to be in the
-        // window (`record`).
-        unsafe {
-            let (t0, t1) = (_mm512_unpacklo_pd(a, b), _mm512_unpackhi_pd(a, b));
-            let (t2, t3) = (_mm512_unpacklo_pd(c, d), _mm512_unpackhi_pd(c, d));
-            // (a_l b_l c_l d_l) for lanes 0 and 2, 4 and 6 (from t0, t2), 1 and 3,
-            // 5 and 7 (from t1, t3).
-            let lo = _mm512_set_epi64(11, 10, 3, 2, 9, 8, 1, 0);
-            let hi = _mm512_set_epi64(15, 14, 7, 6, 13, 12, 5, 4);
-            let pick = |x, idx, y| _mm512_permutex2var_pd(x, idx, y);
-            let pairs = [
-                pick(t0, lo, t2),
-                pick(t1, lo, t3),
-                pick(t0, hi, t2),
-                pick(t1, hi, t3),
-            ];
-            for (l, &j) in js.iter().enumerate() {
-                // Lane l is half (l >> 1) & 1 of pairs[(l & 1) + 2 (l >> 2)].
-                let v = pairs[(l & 1) + 2 * (l >> 2)];
-                let v = match (l >> 1) & 1 {
-                    0 => _mm512_castpd512_pd256(v),
-                    _ => _mm512_extractf64x4_pd::<1>(v),
-                };
-                let r = record(shares, j);
-                _mm256_storeu_pd(r, _mm256_add_pd(_mm256_loadu_pd(r), v));
+        // Four slots at a time (one quad in 2D, two in 3D).
+        for quad in 0..SHARE / 4 {
+            let [a, b, c, d] = [0, 1, 2, 3].map(|k| share[4 * quad + k].0);
+            // SAFETY: the features (caller); each record written is checked to be in the
+            // window (`record`), and holds SHARE f64s, so its quad `quad` is inside it.
+            unsafe {
+                let (t0, t1) = (_mm512_unpacklo_pd(a, b), _mm512_unpackhi_pd(a, b));
+                let (t2, t3) = (_mm512_unpacklo_pd(c, d), _mm512_unpackhi_pd(c, d));
+                // (a_l b_l c_l d_l) for lanes 0 and 2, 4 and 6 (from t0, t2), 1 and 3,
+                // 5 and 7 (from t1, t3).
+                let lo = _mm512_set_epi64(11, 10, 3, 2, 9, 8, 1, 0);
+                let hi = _mm512_set_epi64(15, 14, 7, 6, 13, 12, 5, 4);
+                let pick = |x, idx, y| _mm512_permutex2var_pd(x, idx, y);
+                let pairs = [
+                    pick(t0, lo, t2),
+                    pick(t1, lo, t3),
+                    pick(t0, hi, t2),
+                    pick(t1, hi, t3),
+                ];
+                for (l, &j) in js.iter().enumerate() {
+                    // Lane l is half (l >> 1) & 1 of pairs[(l & 1) + 2 (l >> 2)].
+                    let v = pairs[(l & 1) + 2 * (l >> 2)];
+                    let v = match (l >> 1) & 1 {
+                        0 => _mm512_castpd512_pd256(v),
+                        _ => _mm512_extractf64x4_pd::<1>(v),
+                    };
+                    let r = record(shares, j).add(4 * quad);
+                    _mm256_storeu_pd(r, _mm256_add_pd(_mm256_loadu_pd(r), v));
+                }
             }
         }
     }
@@ -426,24 +429,27 @@ impl Gather for Avx2 {
     /// (a 4 x 4 transpose per half), each added to its record whole.
     #[inline(always)]
     unsafe fn scatter(js: &[u32], share: &Share<Self>, shares: &mut Shares) {
-        const _: () = assert!(SHARE == 4);
+        const _: () = assert!(SHARE.is_multiple_of(4));
         debug_assert!((1..=8).contains(&js.len()));
-        for (half, js) in js.chunks(4).enumerate() {
-            let [a, b, c, d] = share.map(|v| v.0[half]);
-            // SAFETY: the features (caller); each record written is checked to be in
-            // the window (`record`).
-            unsafe {
-                let (t0, t1) = (_mm256_unpacklo_pd(a, b), _mm256_unpackhi_pd(a, b));
-                let (t2, t3) = (_mm256_unpacklo_pd(c, d), _mm256_unpackhi_pd(c, d));
-                let rows = [
-                    _mm256_insertf128_pd::<1>(t0, _mm256_castpd256_pd128(t2)),
-                    _mm256_insertf128_pd::<1>(t1, _mm256_castpd256_pd128(t3)),
-                    _mm256_permute2f128_pd::<0x31>(t0, t2),
-                    _mm256_permute2f128_pd::<0x31>(t1, t3),
-                ];
-                for (&v, &j) in rows.iter().zip(js) {
-                    let r = record(shares, j);
-                    _mm256_storeu_pd(r, _mm256_add_pd(_mm256_loadu_pd(r), v));
+        // Four slots at a time (one quad in 2D, two in 3D).
+        for quad in 0..SHARE / 4 {
+            for (half, js) in js.chunks(4).enumerate() {
+                let [a, b, c, d] = [0, 1, 2, 3].map(|k| share[4 * quad + k].0[half]);
+                // SAFETY: the features (caller); each record written is checked to be in
+                // the window (`record`).
+                unsafe {
+                    let (t0, t1) = (_mm256_unpacklo_pd(a, b), _mm256_unpackhi_pd(a, b));
+                    let (t2, t3) = (_mm256_unpacklo_pd(c, d), _mm256_unpackhi_pd(c, d));
+                    let rows = [
+                        _mm256_insertf128_pd::<1>(t0, _mm256_castpd256_pd128(t2)),
+                        _mm256_insertf128_pd::<1>(t1, _mm256_castpd256_pd128(t3)),
+                        _mm256_permute2f128_pd::<0x31>(t0, t2),
+                        _mm256_permute2f128_pd::<0x31>(t1, t3),
+                    ];
+                    for (&v, &j) in rows.iter().zip(js) {
+                        let r = record(shares, j).add(4 * quad);
+                        _mm256_storeu_pd(r, _mm256_add_pd(_mm256_loadu_pd(r), v));
+                    }
                 }
             }
         }
