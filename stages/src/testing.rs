@@ -1,7 +1,9 @@
 //! Worlds for the stages' unit tests.
+#![cfg_attr(feature = "dim3", allow(dead_code, unused_imports))]
 
 use glam::DVec2;
 use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure, Velocity, Wall};
+use sph_core::dim::{self, Vector};
 use sph_core::kernel::KernelKind;
 use sph_core::sim::{Clock, Constants, Resources, Sim, Tait};
 use sph_core::stage::Stage;
@@ -14,12 +16,12 @@ pub(crate) fn sim(world: hecs::World) -> Sim {
         clock: Clock::default(),
         constants: Constants {
             eos: Tait::new(1000.0, 20.0, 7.0),
-            gravity: DVec2::new(0.0, -9.81),
+            gravity: dim::xy(0.0, -9.81),
             spacing: 0.01,
             h: 0.013,
             kernel: KernelKind::Wendland,
             fluid_height: 0.1,
-            domain: (DVec2::splat(-1.0), DVec2::splat(1.0)),
+            domain: (Vector::splat(-1.0), Vector::splat(1.0)),
         },
         resources: Resources::default(),
         out_dir: std::env::temp_dir(),
@@ -30,6 +32,7 @@ pub(crate) fn sim(world: hecs::World) -> Sim {
 
 /// The four walls of a closed `width` x `height` box from the origin, at rest,
 /// counter-clockwise so that the fluid is inside.
+#[cfg(not(feature = "dim3"))]
 pub(crate) fn closed_box(world: &mut hecs::World, width: f64, height: f64) {
     let corners = [(0.0, 0.0), (width, 0.0), (width, height), (0.0, height)];
     closed_polygon(world, &corners, |_| Default::default());
@@ -37,6 +40,7 @@ pub(crate) fn closed_box(world: &mut hecs::World, width: f64, height: f64) {
 
 /// The walls of a closed polygon through `corners` (counter-clockwise, so that the
 /// fluid is inside), wall k from corner k to the next, at rest on the body `body(k)`.
+#[cfg(not(feature = "dim3"))]
 pub(crate) fn closed_polygon(
     world: &mut hecs::World,
     corners: &[(f64, f64)],
@@ -49,6 +53,33 @@ pub(crate) fn closed_polygon(
             a: DVec2::new(a.0, a.1),
             b: DVec2::new(b.0, b.1),
             body: body(k),
+        };
+        let now = rest.at_rest();
+        world.spawn((rest, now));
+    }
+}
+
+/// The six walls of a closed `size` box from the origin, at rest, each with
+/// (c - a) x (b - a) pointing inside: bottom, top, left, right, back (z = 0), front.
+#[cfg(feature = "dim3")]
+pub(crate) fn closed_box_3d(world: &mut hecs::World, size: Vector) {
+    let (w, h, d) = (size.x, size.y, size.z);
+    let v = Vector::new;
+    let walls = [
+        ("bottom", v(0.0, 0.0, 0.0), v(w, 0.0, 0.0), v(0.0, 0.0, d)),
+        ("top", v(0.0, h, 0.0), v(0.0, h, d), v(w, h, 0.0)),
+        ("left", v(0.0, h, 0.0), v(0.0, 0.0, 0.0), v(0.0, h, d)),
+        ("right", v(w, 0.0, 0.0), v(w, h, 0.0), v(w, 0.0, d)),
+        ("back", v(0.0, 0.0, 0.0), v(0.0, h, 0.0), v(w, 0.0, 0.0)),
+        ("front", v(0.0, 0.0, d), v(w, 0.0, d), v(0.0, h, d)),
+    ];
+    for (name, a, b, c) in walls {
+        let rest = Wall {
+            name: name.into(),
+            a,
+            b,
+            c,
+            body: Default::default(),
         };
         let now = rest.at_rest();
         world.spawn((rest, now));
@@ -99,7 +130,7 @@ pub(crate) fn after_one_step(world: hecs::World, stages: &[(&str, &str)]) -> Sim
 
 /// Every particle of the world, fluid then ghosts: position, velocity, mass, density,
 /// pressure (for the tests' brute-force sums over every particle).
-pub(crate) fn everyone(sim: &Sim) -> Vec<(DVec2, DVec2, f64, f64, f64)> {
+pub(crate) fn everyone(sim: &Sim) -> Vec<(Vector, Vector, f64, f64, f64)> {
     use sph_core::world::{archetype, column};
     let mut all = Vec::new();
     for a in [
@@ -136,6 +167,7 @@ pub(crate) fn out_dir(name: &str) -> std::path::PathBuf {
 
 /// The sites of an `nx` x `ny` block of particles at spacing 0.01 m from a box's
 /// bottom left corner (the first at (0.005, 0.005)), with their column and row.
+#[cfg(not(feature = "dim3"))]
 pub(crate) fn lattice(nx: usize, ny: usize) -> impl Iterator<Item = (usize, usize, DVec2)> {
     (0..nx).flat_map(move |a| {
         (0..ny).map(move |b| {
@@ -176,7 +208,7 @@ pub(crate) fn ghost_sources(sim: &Sim) -> Vec<usize> {
 /// D rho_i/Dt = sum_j m_j (v_i - v_j) . grad_i W_ij (the `Continuity` term) of particle
 /// `i` of `all` ([`everyone`]), summed over every particle within the support of the
 /// test sim's kernel (Wendland, h 0.013 m), not the neighbour lists.
-pub(crate) fn continuity_by_hand(all: &[(DVec2, DVec2, f64, f64, f64)], i: usize) -> f64 {
+pub(crate) fn continuity_by_hand(all: &[(Vector, Vector, f64, f64, f64)], i: usize) -> f64 {
     use sph_core::kernel::{Kernel, Wendland};
     let kernel = Wendland::new(0.013);
     let (xi, vi) = (all[i].0, all[i].1);

@@ -16,6 +16,7 @@
 use glam::DVec2;
 use rayon::prelude::*;
 use sph_core::components::{Density, Fluid, Ghost, MirrorWall, Position, WallPose};
+use sph_core::dim::{Vector, DIM};
 use sph_core::motion::Pose;
 use sph_core::pair::{ColumnKey, Field, Fields, Lane, Me, Pair, Scope};
 use sph_core::sim::{Counter, Sim, Tait};
@@ -107,9 +108,9 @@ pub struct GhostSettings {
 #[inline]
 pub fn ghost_density(
     rho_source: f64,
-    source: DVec2,
-    ghost: DVec2,
-    correction: Option<((Tait, DVec2), Pose)>,
+    source: Vector,
+    ghost: Vector,
+    correction: Option<((Tait, Vector), Pose)>,
 ) -> f64 {
     match correction {
         Some(((eos, g), pose)) => {
@@ -233,16 +234,21 @@ pub struct NoSlipSigns(pub Vec<f64>);
 
 /// v_ij as a viscous term sees it: with `wall_shear`, j's [`NoSlipVelocity`] (a
 /// ghost's no-slip mirror with walls that do not slip) against i's own velocity (the
-/// term must then read [`NoSlipVelocity::FIELDS`] too), else [`Pair::v_ij`].
+/// term must then read [`NoSlipVelocity::FIELDS`] too), else [`Pair::velocity_ij`].
+/// In 3D walls that do not slip are not yet built (`GhostWalls` refuses them), so
+/// there is no `wall_shear`.
 #[inline(always)]
-pub fn viscous_v_ij<L: Lane>(p: &Pair<L>, me: &Me, wall_shear: bool) -> (L, L) {
-    match wall_shear {
-        true => (
+pub fn viscous_v_ij<L: Lane>(p: &Pair<L>, me: &Me, wall_shear: bool) -> [L; DIM] {
+    #[cfg(not(feature = "dim3"))]
+    if wall_shear {
+        return [
             me.lanes::<L>(Field::Vx) - p.j(NoSlipVelocity::X),
             me.lanes::<L>(Field::Vy) - p.j(NoSlipVelocity::Y),
-        ),
-        false => p.v_ij(me),
+        ];
     }
+    #[cfg(feature = "dim3")]
+    debug_assert!(!wall_shear, "no-slip ghost velocities are 2D only");
+    p.velocity_ij(me)
 }
 
 /// The divergence-free SPH factors of one step (Bender & Koschier 2017, eq. 11, in

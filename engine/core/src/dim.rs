@@ -90,6 +90,13 @@ pub fn in_xy(v: Vector) -> Vector {
     return Vector::new(v.x, v.y, 0.0);
 }
 
+/// The z component of a x b: `perp_dot` in 2D, (a x b).z in 3D (a moment about a z
+/// axis).
+#[inline(always)]
+pub fn cross_z(a: Vector, b: Vector) -> f64 {
+    a.x * b.y - a.y * b.x
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -115,6 +115,14 @@ impl CellGrid {
         }
     }
 
+    /// The number of cells.
+    pub fn cell_count(&self) -> usize {
+        #[cfg(not(feature = "dim3"))]
+        return self.nx * self.ny;
+        #[cfg(feature = "dim3")]
+        return self.nx * self.ny * self.nz;
+    }
+
     /// The cell holding `x`, clamped to the grid.
     #[inline(always)]
     pub fn cell_of(&self, x: Vector) -> Cell {

@@ -384,15 +384,7 @@ mod tests {
         }
     }
 
-    /// A world with these walls at rest, as the scenario spawns them.
-    fn world_of(walls: impl IntoIterator<Item = Wall>) -> World {
-        let mut world = World::new();
-        for w in walls {
-            let now = w.at_rest();
-            world.spawn((w, now));
-        }
-        world
-    }
+    use super::tests_any::world_of;
 
     /// An open tank 1 m wide (left, bottom, right as the scenario builds them).
     fn tank() -> World {
@@ -581,5 +573,160 @@ mod tests3d {
         assert!((v - Vector::new(0.2, 1.0, 0.3)).length() < 1e-15, "{v}");
         let mut inside = Vector::splat(0.5);
         assert!(!set.reflect(0.1, &mut inside, [&mut v]));
+    }
+}
+
+/// What both builds share: a wall line's own geometry, the set's accessors, the reach
+/// of a corner (3D: of an edge, which ends), and the reflection off a moving wall.
+#[cfg(test)]
+mod tests_any {
+    use super::*;
+    use crate::dim::{self, DIM};
+    use crate::motion::{Pose, RigidState};
+
+    /// Where the scene's origin is: away from the world's, so that a sign slip in
+    /// `x - a` shows.
+    fn origin() -> Vector {
+        let mut o = dim::xy(0.3, 0.2);
+        if DIM == 3 {
+            o[DIM - 1] = 0.1;
+        }
+        o
+    }
+
+    /// The point (x, y) (and z in 3D) of the scene.
+    fn at(x: f64, y: f64, z: f64) -> Vector {
+        let mut p = dim::xy(x, y);
+        if DIM == 3 {
+            p[DIM - 1] = z;
+        }
+        origin() + p
+    }
+
+    /// A wall of the scene from `a` to `b` (3D: and along z from 0 to 1), riding on
+    /// `body`.
+    fn wall(name: &str, a: (f64, f64), b: (f64, f64), body: Pose) -> Wall {
+        Wall {
+            name: name.into(),
+            a: at(a.0, a.1, 0.0),
+            b: at(b.0, b.1, 0.0),
+            #[cfg(feature = "dim3")]
+            c: at(a.0, a.1, 1.0),
+            body,
+        }
+    }
+
+    /// The floor y = 0 from x = 0 to 1 (in 3D z from 0 to 1 too), riding on `body`.
+    fn floor(body: Pose) -> Wall {
+        wall("floor", (0.0, 0.0), (1.0, 0.0), body)
+    }
+
+    /// The left wall x = 0, from y = 1 down to the floor.
+    fn left() -> Wall {
+        wall("left", (0.0, 1.0), (0.0, 0.0), Pose::default())
+    }
+
+    /// A world with these walls at rest, as the scenario spawns them.
+    pub(super) fn world_of(walls: impl IntoIterator<Item = Wall>) -> World {
+        let mut world = World::new();
+        for w in walls {
+            let now = w.at_rest();
+            world.spawn((w, now));
+        }
+        world
+    }
+
+    #[test]
+    fn a_wall_line_measures_mirrors_and_knows_behind() {
+        let line = WallLine::of(&floor(Pose::default()).at_rest());
+        let x = at(0.3, 0.2, 0.4);
+        assert!((line.distance(x) - 0.2).abs() < 1e-15);
+        assert!((line.abscissa(x) - 0.3).abs() < 1e-15);
+        assert!((line.mirror(x) - at(0.3, -0.2, 0.4)).length() < 1e-15);
+        assert!(line.behind(at(0.3, -0.01, 0.4)));
+        assert!(line.behind(at(1.0, -0.01, 0.0)), "end points included");
+        assert!(!line.behind(at(1.01, -0.01, 0.4)), "past the end");
+        assert!(!line.behind(at(-0.01, -0.01, 0.4)), "before the start");
+        assert!(!line.behind(x), "in front");
+        if DIM == 3 {
+            assert!(!line.behind(at(0.3, -0.01, 1.01)), "beyond the far edge");
+            assert!(!line.behind(at(0.3, -0.01, -0.01)), "before the near edge");
+        }
+    }
+
+    #[test]
+    fn the_set_counts_its_walls_and_who_is_in_front() {
+        let set = Walls::of(&world_of([floor(Pose::default()), left()]));
+        assert_eq!((set.len(), set.is_empty()), (2, false));
+        assert!(Walls::of(&World::new()).is_empty());
+        assert!(set.in_front_of_all(at(0.5, 0.5, 0.5)));
+        assert!(set.in_front_of_all(at(0.0, 0.0, 0.5)), "on both walls");
+        assert!(!set.in_front_of_all(at(0.5, -1e-9, 0.5)));
+        assert!(!set.in_front_of_all(at(-1e-9, 0.5, 0.5)));
+    }
+
+    /// Behind both walls near where they meet: a corner crossing within the reach of
+    /// the meeting point (3D: of the meeting edge, whose ends bound it), none beyond.
+    #[test]
+    fn a_corner_reaches_as_far_as_it_says() {
+        let set = Walls::of(&world_of([floor(Pose::default()), left()]));
+        let reach = 0.1;
+        let c = set.corners()[0];
+        assert!(set.past_corner(&c, at(-0.07, -0.07, 0.5), reach));
+        assert!(
+            !set.past_corner(&c, at(-0.071, -0.071, 0.5), reach),
+            "beyond the reach"
+        );
+        assert!(
+            !set.past_corner(&c, at(0.01, -0.07, 0.5), reach),
+            "in front of one"
+        );
+        if DIM == 3 {
+            // Past the edge's end at z = 1: the distance to the end, not to the line.
+            assert!(set.past_corner(&c, at(-0.05, -0.05, 1.05), reach));
+            assert!(!set.past_corner(&c, at(-0.05, -0.05, 1.1), reach));
+            assert!(!set.past_corner(&c, at(-0.05, -0.05, -0.1), reach));
+        }
+    }
+
+    /// Walls meet only where an end (3D: an edge) of one lies on the other, not on its
+    /// line beyond it; a step down (the fluid on the outside of the bend) is a corner
+    /// that is not convex.
+    #[test]
+    fn corners_are_found_only_where_walls_touch_and_know_their_side() {
+        let apart = wall("apart", (-0.5, 1.0), (-0.5, 0.0), Pose::default());
+        assert!(Walls::of(&world_of([floor(Pose::default()), apart]))
+            .corners()
+            .is_empty());
+        // The floor, then a wall down from its end at x = 1 to y = -1: water above
+        // the floor flows over the step.
+        let down = wall("down", (1.0, 0.0), (1.0, -1.0), Pose::default());
+        let set = Walls::of(&world_of([floor(Pose::default()), down]));
+        assert_eq!(set.corners().len(), 1);
+        assert!(!set.corners()[0].convex);
+        let set = Walls::of(&world_of([floor(Pose::default()), left()]));
+        assert!(set.corners()[0].convex);
+    }
+
+    /// A particle behind a floor that turns about the scene's origin: its position is
+    /// mirrored, and its velocity's normal part relative to the floor's velocity at
+    /// the particle's foot reversed.
+    #[test]
+    fn the_reflection_is_relative_to_the_wall_at_the_particle_s_foot() {
+        let body = Pose {
+            pivot: origin(),
+            state: RigidState {
+                omega: 2.0,
+                ..RigidState::default()
+            },
+        };
+        let set = Walls::of(&world_of([floor(body)]));
+        let vector = |x, y, z| at(x, y, z) - origin();
+        let (mut x, mut v) = (at(0.5, -0.01, 0.3), vector(0.1, -0.3, 0.2));
+        assert!(set.reflect(0.1, &mut x, [&mut v]));
+        assert!((x - at(0.5, 0.01, 0.3)).length() < 1e-15, "{x}");
+        // The foot (0.5, 0) moves at omega z x r = (0, 1): v_n = -0.3 - 1 = -1.3
+        // relative, reversed: -0.3 + 2.6.
+        assert!((v - vector(0.1, 2.3, 0.2)).length() < 1e-12, "{v}");
     }
 }

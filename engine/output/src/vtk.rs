@@ -4,14 +4,14 @@ use std::fmt::Write as _;
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 
-use glam::DVec2;
+use sph_core::dim::Vector;
 
 use sph_core::atomic::{write_atomic, write_atomic_with};
 
 /// Per-particle arrays of one frame; every non-empty array has one entry per position.
 pub struct FrameFields<'a> {
-    pub positions: &'a [DVec2],
-    pub velocity: &'a [DVec2],
+    pub positions: &'a [Vector],
+    pub velocity: &'a [Vector],
     pub density: &'a [f64],
     pub pressure: &'a [f64],
     /// May be empty: then the array is omitted.
@@ -20,7 +20,8 @@ pub struct FrameFields<'a> {
     pub extra_scalars: &'a [(&'a str, &'a [f64])],
 }
 
-/// Writes one frame as a `.vtp` file (points at z = 0, one vertex cell per point), atomically.
+/// Writes one frame as a `.vtp` file (2D points at z = 0, one vertex cell per point),
+/// atomically.
 ///
 /// The document is streamed to the file (base64 in small chunks), so writing a frame
 /// holds no copy of it in memory.
@@ -116,11 +117,12 @@ fn write_vtp_document(w: &mut impl Write, f: &FrameFields) -> io::Result<()> {
     w.write_all(b"    </Piece>\n  </PolyData>\n</VTKFile>\n")
 }
 
-/// A 2D vector as the little-endian bytes of (x, y, 0).
-fn xyz(v: DVec2) -> [u8; 24] {
+/// A vector as the little-endian bytes of (x, y, z), z = 0 in 2D.
+fn xyz(v: Vector) -> [u8; 24] {
     let mut b = [0; 24];
-    b[..8].copy_from_slice(&v.x.to_le_bytes());
-    b[8..16].copy_from_slice(&v.y.to_le_bytes());
+    for (k, c) in v.to_array().into_iter().enumerate() {
+        b[8 * k..8 * k + 8].copy_from_slice(&c.to_le_bytes());
+    }
     b
 }
 
@@ -269,7 +271,7 @@ fn xml_escape(s: &str) -> String {
 }
 
 /// Writes straight segments (walls) as a VTK PolyData file of lines, atomically.
-pub fn write_segments_vtp(path: &Path, segments: &[(glam::DVec2, glam::DVec2)]) -> io::Result<()> {
+pub fn write_segments_vtp(path: &Path, segments: &[(Vector, Vector)]) -> io::Result<()> {
     let n = segments.len();
     let mut s = String::with_capacity(400 + 120 * n);
     s.push_str("<?xml version=\"1.0\"?>\n<VTKFile type=\"PolyData\" version=\"1.0\" byte_order=\"LittleEndian\">\n  <PolyData>\n");
@@ -280,7 +282,16 @@ pub fn write_segments_vtp(path: &Path, segments: &[(glam::DVec2, glam::DVec2)]) 
     );
     s.push_str("      <Points>\n        <DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">\n");
     for (a, b) in segments {
-        let _ = writeln!(s, "          {} {} 0 {} {} 0", a.x, a.y, b.x, b.y);
+        let [a, b] = [a, b].map(|v| {
+            let mut p = [0.0; 3];
+            p[..v.to_array().len()].copy_from_slice(&v.to_array());
+            p
+        });
+        let _ = writeln!(
+            s,
+            "          {} {} {} {} {} {}",
+            a[0], a[1], a[2], b[0], b[1], b[2]
+        );
     }
     s.push_str("        </DataArray>\n      </Points>\n      <Lines>\n");
     s.push_str(
@@ -370,6 +381,7 @@ impl PvdIndex {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use sph_core::dim;
     use std::fs;
 
     fn test_dir(name: &str) -> PathBuf {
@@ -381,12 +393,11 @@ mod tests {
 
     #[test]
     fn segments_file_lists_two_points_per_line() {
-        use glam::DVec2;
         let dir = test_dir("segments");
         let path = dir.join("walls.vtp");
         let segs = [
-            (DVec2::new(0.0, 1.0), DVec2::new(0.0, 0.0)),
-            (DVec2::new(0.0, 0.0), DVec2::new(2.0, 0.5)),
+            (dim::xy(0.0, 1.0), dim::xy(0.0, 0.0)),
+            (dim::xy(0.0, 0.0), dim::xy(2.0, 0.5)),
         ];
         write_segments_vtp(&path, &segs).unwrap();
         let text = fs::read_to_string(&path).unwrap();
@@ -394,7 +405,7 @@ mod tests {
         assert!(text.contains("NumberOfLines=\"2\""));
         assert!(text.contains("0 0 0 2 0.5 0"));
         assert!(text.contains("2 4 \n"));
-        assert!(write_segments_vtp(&path, &[(DVec2::NAN, DVec2::ZERO)]).is_err());
+        assert!(write_segments_vtp(&path, &[(Vector::NAN, Vector::ZERO)]).is_err());
         let _ = fs::remove_dir_all(&dir);
     }
 
@@ -466,12 +477,10 @@ mod tests {
     #[test]
     fn three_point_frame_and_pvd() {
         let dir = test_dir("frame");
-        let positions = [
-            DVec2::new(0.0, 0.0),
-            DVec2::new(1.0, 0.5),
-            DVec2::new(2.0, -1.0),
-        ];
-        let velocity = [DVec2::new(0.1, 0.2), DVec2::ZERO, DVec2::new(-3.0, 4.0)];
+        let mut positions = [dim::xy(0.0, 0.0), dim::xy(1.0, 0.5), dim::xy(2.0, -1.0)];
+        // A z of its own in 3D (z = 0 in 2D).
+        positions[2][dim::DIM - 1] = dim::pick(-1.0, 1.5);
+        let velocity = [dim::xy(0.1, 0.2), Vector::ZERO, dim::xy(-3.0, 4.0)];
         let density = [1000.0, 1001.5, 999.0];
         let pressure = [0.0, 10.0, -5.0];
         let neighbours = [2, 3, 1];
@@ -524,7 +533,7 @@ mod tests {
 
         assert_eq!(
             f64s(&array_payload(&doc, "Points")),
-            [0.0, 0.0, 0.0, 1.0, 0.5, 0.0, 2.0, -1.0, 0.0]
+            [0.0, 0.0, 0.0, 1.0, 0.5, 0.0, 2.0, -1.0, dim::pick(0.0, 1.5)]
         );
         assert_eq!(
             f64s(&array_payload(&doc, "velocity"))[6..],
@@ -564,8 +573,8 @@ mod tests {
 
     #[test]
     fn optional_neighbours_and_length_checks() {
-        let positions = [DVec2::ZERO, DVec2::ONE];
-        let v = [DVec2::ZERO; 2];
+        let positions = [Vector::ZERO, Vector::ONE];
+        let v = [Vector::ZERO; 2];
         let s = [1.0, 2.0];
         let mut frame = FrameFields {
             positions: &positions,

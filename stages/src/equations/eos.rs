@@ -82,7 +82,8 @@ fn apply(eos: &Tait, floor: f64, rho: &[Density], p: &mut [Pressure]) {
         .for_each(|(p, rho)| p.0 = eos.pressure(rho.0).max(floor));
 }
 
-#[cfg(test)]
+// 2D set-ups; the 3D build's own tests are in `tests3d` modules.
+#[cfg(all(test, not(feature = "dim3")))]
 mod tests {
     use super::*;
     use crate::testing::sim;

@@ -4,12 +4,12 @@
 
 use crate::terms::{Fixed, RateTerms, TermBit};
 use crate::wall_work;
-use glam::DVec2;
 use rayon::prelude::*;
 use sph_core::components::{
     Acceleration, Density, DensityRate, Mass, NeighbourCount, Position, Pressure, Velocity,
 };
 use sph_core::contract::Access;
+use sph_core::dim::Vector;
 use sph_core::pair::{
     with_records, Counted, EquationsOfMotion, Field, Fields, PairTerm, Pass, RateSums, RateTerm,
     Shares, SHARE, SHARE_AX, SHARE_AY, SHARE_DRHO,
@@ -26,7 +26,7 @@ pub(crate) fn declare_reads(access: Access, fields: Fields) -> Access {
         .reads::<Neighbours>()
         .reads::<Position>()
         .reads::<Mass>()
-        .reads_if::<Velocity>(has(&[Field::Vx, Field::Vy]))
+        .reads_if::<Velocity>(has(&Field::VELOCITY))
         .reads_if::<Density>(has(&[Field::Rho, Field::Sound, Field::PRho2]))
         .reads_if::<Pressure>(has(&[Field::PRho2]))
 }
@@ -125,8 +125,16 @@ pub(crate) fn run(
     const PG_AV_AP_C_F: u16 = PG_AV_AP_C | bits(&[Fourtakas]);
     const PG_AV_C_MC: u16 = PG_AV_C | bits(&[MolteniColagrossi]);
     const PG_AV_C_F: u16 = PG_AV_C | bits(&[Fourtakas]);
+    #[cfg(not(feature = "dim3"))]
     const PG_AV_AP_C_D: u16 = PG_AV_AP_C | bits(&[DeltaSph]);
+    #[cfg(not(feature = "dim3"))]
     const PG_AV_C_D: u16 = PG_AV_C | bits(&[DeltaSph]);
+    // 3D has no delta-SPH yet: the sets without it, whose branches above match first
+    // (the same loops, none compiled twice).
+    #[cfg(feature = "dim3")]
+    const PG_AV_AP_C_D: u16 = PG_AV_AP_C;
+    #[cfg(feature = "dim3")]
+    const PG_AV_C_D: u16 = PG_AV_C;
     const RIEMANN: u16 = bits(&[RiemannPressure, Continuity, RiemannDiffusion]);
     if let Some(sums) = kernel_sums {
         return match Fixed::<RIEMANN>::of(terms) {
@@ -370,7 +378,7 @@ fn each_pair_once<T, K>(
     nb: &Neighbours,
     out: Outs<'_>,
     scratch: &mut Scratch,
-    g: DVec2,
+    g: Vector,
     eos: &sph_core::sim::Tait,
     state: Option<(&[Velocity], &[Density], &[Mass])>,
 ) where
@@ -428,6 +436,10 @@ fn each_pair_once<T, K>(
                     let mut own = [0.0; SHARE];
                     own[SHARE_AX] = s.acc.x;
                     own[SHARE_AY] = s.acc.y;
+                    #[cfg(feature = "dim3")]
+                    {
+                        own[sph_core::pair::SHARE_AZ] = s.acc.z;
+                    }
                     own[SHARE_DRHO] = s.drho;
                     own[COUNT] = f64::from(count);
                     window.add(i, own);
@@ -445,10 +457,13 @@ fn each_pair_once<T, K>(
     }
     // Gravity last, as in the pass over whole lists.
     let records = &shares[..];
-    out.acc
-        .par_iter_mut()
-        .zip(records)
-        .for_each(|(a, r)| a.0 = DVec2::new(r[SHARE_AX], r[SHARE_AY]) + g);
+    out.acc.par_iter_mut().zip(records).for_each(|(a, r)| {
+        #[cfg(not(feature = "dim3"))]
+        let shared = Vector::new(r[SHARE_AX], r[SHARE_AY]);
+        #[cfg(feature = "dim3")]
+        let shared = Vector::new(r[SHARE_AX], r[SHARE_AY], r[sph_core::pair::SHARE_AZ]);
+        a.0 = shared + g;
+    });
     out.rate
         .par_iter_mut()
         .zip(records)

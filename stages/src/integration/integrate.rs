@@ -10,12 +10,12 @@
 
 use crate::vocab::GuardPower;
 use crate::vocab::{DensityFloored, WallReflections};
-use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{get_column, put_column, Dec, Enc};
 use sph_core::components::{Acceleration, Density, DensityRate, Fluid, Mass, Position, Velocity};
 use sph_core::contract::Access;
+use sph_core::dim::Vector;
 use sph_core::sim::Counter;
 use sph_core::sim::{Clock, Sim, Tait};
 use sph_core::stage::{SetupError, Stage, StepError};
@@ -419,9 +419,9 @@ struct Kick<'a> {
     reach: f64,
     least: Option<f64>,
     eos: Tait,
-    g: DVec2,
-    lo: DVec2,
-    hi: DVec2,
+    g: Vector,
+    lo: Vector,
+    hi: Vector,
     rho_band: (f64, f64),
     walls: &'a Walls,
 }
@@ -478,7 +478,7 @@ impl Kick<'_> {
         // and density are the state carried on (the integer-time ones are
         // predictions from them), so their changes are what the guard adds for good.
         let de = if hit || raised {
-            let e = |x: DVec2, v: DVec2, rho: f64| {
+            let e = |x: Vector, v: Vector, rho: f64| {
                 m.0 * (0.5 * v.length_squared() - self.g.dot(x) + self.eos.internal_energy(rho))
             };
             let (v1, rho1) = (before.1 + (vh.0 - before.3), before.2 + (rh.0 - before.4));
@@ -500,7 +500,7 @@ impl Kick<'_> {
 
 impl Integrate {
     /// Why particle `i` (at `p`, density `r`) failed the end-of-step check.
-    fn diagnose(&self, sim: &Sim, i: usize, p: DVec2, r: f64) -> StepError {
+    fn diagnose(&self, sim: &Sim, i: usize, p: Vector, r: f64) -> StepError {
         let (lo, hi) = sim.constants.domain;
         let limit = self.params.density_limit;
         let what = if !p.is_finite() || !r.is_finite() {
@@ -549,7 +549,7 @@ fn raise_to_floor(least: f64, rho: &mut Density, rh: &mut HalfDensity) -> bool {
     low
 }
 
-fn unstable(what: &str, i: usize, x: DVec2) -> StepError {
+fn unstable(what: &str, i: usize, x: Vector) -> StepError {
     StepError::Unstable {
         what: what.to_string(),
         particle: Some(i as u32),
@@ -557,10 +557,12 @@ fn unstable(what: &str, i: usize, x: DVec2) -> StepError {
     }
 }
 
-#[cfg(test)]
+// 2D set-ups; the 3D build's own tests are in `tests3d` modules.
+#[cfg(all(test, not(feature = "dim3")))]
 mod tests {
     use super::*;
     use crate::testing::{closed_box, fluid_column, pipeline, sim};
+    use glam::DVec2;
     use sph_core::sim::Counter;
 
     /// One fluid particle's state: position, velocity, density, and the rates the

@@ -13,12 +13,12 @@
 
 use crate::scan::Scan;
 use crate::sort_particles::{counting_sort, sort_by_cell, SortBuffers};
-use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::{Fluid, Ghost, NeighbourCount, Position};
 use sph_core::contract::Access;
+use sph_core::dim::Vector;
 use sph_core::sim::Sim;
 use sph_core::stage::{Stage, StepError};
 use sph_core::vocab::{
@@ -112,7 +112,7 @@ fn rebuild(grid: &mut CellGrid, positions: Joined<Position>) {
         .for_each(|(j, c)| *c = grid.index_of(positions.get(j as u32).0) as u32);
     counting_sort(
         &cells,
-        grid.nx * grid.ny,
+        grid.cell_count(),
         &mut grid.start,
         &mut grid.particles,
     );
@@ -125,6 +125,13 @@ fn rebuild(grid: &mut CellGrid, positions: Joined<Position>) {
             let p = positions.get(j).0;
             (*x, *y) = (p.x, p.y);
         });
+    #[cfg(feature = "dim3")]
+    {
+        resize_by_eighths(&mut grid.zs, n, 0.0);
+        (&mut grid.zs[..], &grid.particles[..])
+            .into_par_iter()
+            .for_each(|(z, &j)| *z = positions.get(j).0.z);
+    }
 }
 
 /// Puts a neighbour list's fluid particles in ascending order and its ghosts (indices
@@ -179,6 +186,8 @@ impl Stage for NeighbourGrid {
         let support = sim.constants.support();
         let (lo, hi) = sim.constants.domain;
         let cells = ((hi.x - lo.x) / support + 3.0) * ((hi.y - lo.y) / support + 3.0);
+        #[cfg(feature = "dim3")]
+        let cells = cells * ((hi.z - lo.z) / support + 3.0);
         if cells > MAX_CELLS {
             return Err(sph_core::SetupError::new(
                 "neighbour_grid",
@@ -208,8 +217,9 @@ impl Stage for NeighbourGrid {
         e.u64(n_fluid as u64);
         e.u64(built.len() as u64);
         for p in built {
-            e.f64(p.x);
-            e.f64(p.y);
+            for c in p.to_array() {
+                e.f64(c);
+            }
         }
         Ok(e.into_bytes())
     }
@@ -221,7 +231,7 @@ impl Stage for NeighbourGrid {
         self.calls = d.u64()?;
         self.last_sort = Some(d.u64()?).filter(|&c| c != u64::MAX);
         let n_fluid = d.u64()? as usize;
-        let n = d.len(16)?;
+        let n = d.len(8 * sph_core::dim::DIM)?;
         if n_fluid > n {
             return Err(sph_core::StateError::Mismatch(format!(
                 "the neighbour lists' build holds {n} particles, fewer than its {n_fluid} fluid particles"
@@ -229,7 +239,11 @@ impl Stage for NeighbourGrid {
         }
         let mut built = Vec::with_capacity(n);
         for _ in 0..n {
-            built.push(Position(DVec2::new(d.f64()?, d.f64()?)));
+            let mut p = Vector::ZERO;
+            for k in 0..sph_core::dim::DIM {
+                p[k] = d.f64()?;
+            }
+            built.push(Position(p));
         }
         d.end()?;
         let mut nb = sim.resources.take::<Neighbours>().unwrap_or_default();
@@ -358,7 +372,7 @@ impl NeighbourGrid {
         let sorted = sort_by_cell(
             &sim.world,
             kinds,
-            shape.nx * shape.ny,
+            shape.cell_count(),
             |x| shape.index_of(x),
             SortBuffers {
                 cells: &mut cells,
@@ -380,7 +394,7 @@ impl NeighbourGrid {
         nb.skin = self.skin * sim.constants.spacing;
         let reach = nb.reach();
         let (lo, hi) = sim.constants.domain;
-        let pad = DVec2::splat(reach);
+        let pad = Vector::splat(reach);
         nb.grid.shape((lo - pad, hi + pad), reach / REACH as f64);
     }
 
@@ -418,9 +432,13 @@ impl NeighbourGrid {
             // the positions of the build take).
             let g = &mut nb.grid;
             (g.xs, g.ys, g.cells) = (Vec::new(), Vec::new(), Vec::new());
+            #[cfg(feature = "dim3")]
+            {
+                g.zs = Vec::new();
+            }
         }
         let joint = fpos.len() + gpos.len();
-        resize_by_eighths(&mut nb.built_at, joint, DVec2::ZERO);
+        resize_by_eighths(&mut nb.built_at, joint, Vector::ZERO);
         let (f, g) = nb.built_at.split_at_mut(fpos.len());
         f.par_iter_mut().zip(fpos).for_each(|(b, p)| *b = p.0);
         g.par_iter_mut().zip(gpos).for_each(|(b, p)| *b = p.0);

@@ -9,8 +9,8 @@
 //! test is the same arithmetic in both (dx*dx + dy*dy < r_s^2, no fused multiply-add),
 //! so a run's numbers do not depend on which one the machine uses.
 
-use glam::DVec2;
 use sph_core::components::Position;
+use sph_core::dim::Vector;
 use sph_core::vocab::{resize_by_eighths, CellGrid, NeighbourBlock};
 use std::ops::Range;
 
@@ -81,10 +81,12 @@ pub(crate) fn test_numbers(mut seed: u64) -> impl FnMut() -> f64 {
     }
 }
 
-/// The candidates of one row of cells: their x, y and joint indices.
+/// The candidates of one row of cells: their x, y (and z in 3D) and joint indices.
 pub(crate) struct Candidates<'a> {
     pub xs: &'a [f64],
     pub ys: &'a [f64],
+    #[cfg(feature = "dim3")]
+    pub zs: &'a [f64],
     pub ids: &'a [u32],
 }
 
@@ -99,7 +101,7 @@ fn build_block(
     r2max: f64,
     range: Range<usize>,
     block: &mut NeighbourBlock,
-    scan: impl Fn(DVec2, u32, f64, &Candidates, &mut [u32]) -> usize,
+    scan: impl Fn(Vector, u32, f64, &Candidates, &mut [u32]) -> usize,
 ) {
     block.offsets.clear();
     block.offsets.push(0);
@@ -115,6 +117,8 @@ fn build_block(
             let c = Candidates {
                 xs: &grid.xs[cand.clone()],
                 ys: &grid.ys[cand.clone()],
+                #[cfg(feature = "dim3")]
+                zs: &grid.zs[cand.clone()],
                 ids: &grid.particles[cand],
             };
             len += scan(xi, i as u32, r2max, &c, &mut block.list[len..]);
@@ -127,12 +131,20 @@ fn build_block(
 /// The portable scan: write every candidate, keep it (advance the length) if it is
 /// within the support and not i itself.
 #[inline(always)]
-fn scan_scalar(xi: DVec2, i: u32, r2max: f64, c: &Candidates, out: &mut [u32]) -> usize {
+fn scan_scalar(xi: Vector, i: u32, r2max: f64, c: &Candidates, out: &mut [u32]) -> usize {
     let out = &mut out[..c.ids.len()];
     let mut kept = 0;
+    #[cfg(not(feature = "dim3"))]
     for ((&x, &y), &j) in c.xs.iter().zip(c.ys).zip(c.ids) {
         let (dx, dy) = (xi.x - x, xi.y - y);
         let keep = (dx * dx + dy * dy < r2max) & (j != i);
+        out[kept] = j;
+        kept += keep as usize;
+    }
+    #[cfg(feature = "dim3")]
+    for (((&x, &y), &z), &j) in c.xs.iter().zip(c.ys).zip(c.zs).zip(c.ids) {
+        let (dx, dy, dz) = (xi.x - x, xi.y - y, xi.z - z);
+        let keep = (dx * dx + dy * dy + dz * dz < r2max) & (j != i);
         out[kept] = j;
         kept += keep as usize;
     }
@@ -168,7 +180,7 @@ mod avx512 {
     #[target_feature(enable = "avx512f,avx512vl,popcnt")]
     #[inline]
     pub(super) unsafe fn scan(
-        xi: DVec2,
+        xi: Vector,
         i: u32,
         r2max: f64,
         c: &Candidates,
@@ -176,7 +188,11 @@ mod avx512 {
     ) -> usize {
         let n = c.ids.len();
         assert!(c.xs.len() == n && c.ys.len() == n && out.len() >= n);
+        #[cfg(feature = "dim3")]
+        assert!(c.zs.len() == n);
         let (px, py) = (_mm512_set1_pd(xi.x), _mm512_set1_pd(xi.y));
+        #[cfg(feature = "dim3")]
+        let pz = _mm512_set1_pd(xi.z);
         let r2 = _mm512_set1_pd(r2max);
         let me = _mm256_set1_epi32(i as i32);
         let mut kept = 0usize;
@@ -198,6 +214,12 @@ mod avx512 {
                 let j = _mm256_maskz_loadu_epi32(lanes, c.ids.as_ptr().add(k) as *const i32);
                 let (dx, dy) = (_mm512_sub_pd(px, x), _mm512_sub_pd(py, y));
                 let d2 = _mm512_add_pd(_mm512_mul_pd(dx, dx), _mm512_mul_pd(dy, dy));
+                #[cfg(feature = "dim3")]
+                let d2 = {
+                    let z = _mm512_maskz_loadu_pd(lanes, c.zs.as_ptr().add(k));
+                    let dz = _mm512_sub_pd(pz, z);
+                    _mm512_add_pd(d2, _mm512_mul_pd(dz, dz))
+                };
                 let near = _mm512_mask_cmp_pd_mask::<_CMP_LT_OQ>(lanes, d2, r2);
                 let keep = near & _mm256_cmpneq_epi32_mask(j, me);
                 let packed = _mm256_maskz_compress_epi32(keep, j);
@@ -233,9 +255,13 @@ mod tests {
                 xs[2] = 1.0; // exactly on the support (y may push it out or not)
             }
             let ids: Vec<u32> = (0..n as u32).map(|j| 3 * j).collect();
+            #[cfg(feature = "dim3")]
+            let zs: Vec<f64> = (0..n).map(|_| 2.0 * next() - 1.0).collect();
             let c = Candidates {
                 xs: &xs,
                 ys: &ys,
+                #[cfg(feature = "dim3")]
+                zs: &zs,
                 ids: &ids,
             };
             let me = if n > 5 { ids[5] } else { u32::MAX };
@@ -244,18 +270,22 @@ mod tests {
                 .map(|scan| {
                     let mut out = vec![0; n];
                     let k = match scan {
-                        Scan::Scalar => scan_scalar(DVec2::ZERO, me, r2max, &c, &mut out),
+                        Scan::Scalar => scan_scalar(Vector::ZERO, me, r2max, &c, &mut out),
                         #[cfg(target_arch = "x86_64")]
                         Scan::Avx512 => unsafe {
-                            avx512::scan(DVec2::ZERO, me, r2max, &c, &mut out)
+                            avx512::scan(Vector::ZERO, me, r2max, &c, &mut out)
                         },
                     };
                     out.truncate(k);
                     out
                 })
                 .collect();
+            #[cfg(not(feature = "dim3"))]
+            let d2 = |k: usize| xs[k] * xs[k] + ys[k] * ys[k];
+            #[cfg(feature = "dim3")]
+            let d2 = |k: usize| xs[k] * xs[k] + ys[k] * ys[k] + zs[k] * zs[k];
             let expected: Vec<u32> = (0..n)
-                .filter(|&k| xs[k] * xs[k] + ys[k] * ys[k] < r2max && ids[k] != me)
+                .filter(|&k| d2(k) < r2max && ids[k] != me)
                 .map(|k| ids[k])
                 .collect();
             for list in &lists {

@@ -40,7 +40,7 @@ pub fn sort_by_cell(
     world: &hecs::World,
     kinds: &ColumnKinds,
     n_cells: usize,
-    cell_of: impl Fn(glam::DVec2) -> usize + Sync,
+    cell_of: impl Fn(sph_core::dim::Vector) -> usize + Sync,
     scratch: SortBuffers,
 ) -> Result<bool, StepError> {
     let Some(fluid) = archetype::<Fluid>(world) else {

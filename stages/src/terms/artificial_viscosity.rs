@@ -10,7 +10,7 @@ use super::{check_non_negative, Term};
 use crate::vocab::viscous_v_ij;
 use serde::{Deserialize, Serialize};
 use sph_core::contract::Access;
-use sph_core::pair::{Field, Fields, Lane, Me, Pair, RateTerm, Rates};
+use sph_core::pair::{dot, Field, Fields, Lane, Me, Pair, RateTerm, Rates};
 use sph_core::sim::Constants;
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -43,7 +43,8 @@ pub struct ArtificialViscosity {
 }
 
 impl Term for ArtificialViscosity {
-    const READS: Fields = Fields::of(&[Field::Vx, Field::Vy, Field::Rho, Field::Sound]);
+    const READS: Fields =
+        Fields::of(&Field::VELOCITY).with(Fields::of(&[Field::Rho, Field::Sound]));
     type Params = Params;
     fn check(p: &Params) -> Result<(), sph_core::ParamError> {
         check_non_negative(&[("alpha", p.alpha), ("beta", p.beta)])
@@ -83,8 +84,8 @@ impl RateTerm for ArtificialViscosity {
     #[inline(always)]
     fn pair_both<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>, rj: &mut Rates<L>) {
         let c = L::splat;
-        let (wx, wy) = viscous_v_ij(p, me, self.shear);
-        let vx = wx * p.dx + wy * p.dy;
+        let w = viscous_v_ij(p, me, self.shear);
+        let vx = dot(w, p.x_ij());
         let d = p.r * p.r + c(self.eta2);
         let cbar = c(0.5) * (me.lanes::<L>(Field::Sound) + p.j(Field::Sound));
         let rhobar = c(0.5) * (me.lanes::<L>(Field::Rho) + p.j(Field::Rho));
@@ -99,7 +100,7 @@ impl RateTerm for ArtificialViscosity {
         };
         let visc = visc.keep(vx.lt(L::zero()));
         r.coef = r.coef + visc;
-        let vij_grad = wx * p.gx + wy * p.gy;
+        let vij_grad = dot(w, p.grad());
         let dissipation = visc * vij_grad;
         r.power = r.power + p.j(Field::Mass) * dissipation;
         rj.power = rj.power + me.lanes::<L>(Field::Mass) * dissipation;

@@ -3,7 +3,7 @@
 
 use super::Term;
 use serde::{Deserialize, Serialize};
-use sph_core::pair::{Field, Fields, Lane, Me, Pair, RateTerm, Rates};
+use sph_core::pair::{dot, Field, Fields, Lane, Me, Pair, RateTerm, Rates};
 use sph_core::sim::Constants;
 
 /// `Continuity()`: no parameters.
@@ -15,7 +15,7 @@ pub struct Params {}
 pub struct Continuity;
 
 impl Term for Continuity {
-    const READS: Fields = Fields::of(&[Field::Vx, Field::Vy]);
+    const READS: Fields = Fields::of(&Field::VELOCITY);
     type Params = Params;
     fn build(_: &Params, _: &Constants) -> Self {
         Continuity
@@ -34,8 +34,7 @@ impl RateTerm for Continuity {
     const SYMMETRIC: bool = true;
     #[inline(always)]
     fn pair_both<L: Lane>(&self, me: &Me, p: &Pair<L>, ri: &mut Rates<L>, rj: &mut Rates<L>) {
-        let (wx, wy) = p.v_ij(me);
-        let v_grad = wx * p.gx + wy * p.gy;
+        let v_grad = dot(p.velocity_ij(me), p.grad());
         ri.drho = ri.drho + p.j(Field::Mass) * v_grad;
         rj.drho = rj.drho + me.lanes::<L>(Field::Mass) * v_grad;
     }

@@ -7,7 +7,7 @@
 //! sums run over fluid and ghost particles, like the continuity equation's.
 
 use serde::{Deserialize, Serialize};
-use sph_core::pair::{Field, Lane, Me, Pair};
+use sph_core::pair::{dot, Field, Lane, Me, Pair};
 use sph_core::sim::Constants;
 
 /// The parameters of every density-diffusion term.
@@ -68,7 +68,7 @@ impl Scale {
     pub fn fluxes<L: Lane>(&self, me: &Me, p: &Pair<L>, d_ij: L, d_ji: L) -> (L, L) {
         let c = L::splat;
         let (rho_i, rho_j) = (me.lanes::<L>(Field::Rho), p.j(Field::Rho));
-        let x_grad = L::zero() - (p.dx * p.gx + p.dy * p.gy);
+        let x_grad = L::zero() - dot(p.x_ij(), p.grad());
         let t = c(2.0 * self.coef) * x_grad / ((p.r * p.r + c(self.eta2)) * rho_i * rho_j);
         (
             d_ij * p.j(Field::Mass) * rho_i * t,

@@ -14,7 +14,7 @@
 
 use super::diffusion::{Params, Scale};
 use super::Term;
-use sph_core::pair::{Field, Fields, Lane, Me, Pair, RateTerm, Rates};
+use sph_core::pair::{dot, splat, Field, Fields, Lane, Me, Pair, RateTerm, Rates};
 use sph_core::sim::Constants;
 
 /// `Fourtakas(delta: 0.1)`.
@@ -22,8 +22,7 @@ use sph_core::sim::Constants;
 pub struct Fourtakas {
     scale: Scale,
     /// rho_0 g / B, so that u = (rho_0 g / B) . x_ji.
-    gx_b: f64,
-    gy_b: f64,
+    g_b: [f64; sph_core::dim::DIM],
     /// rho_0 times the Taylor coefficients of (1+u)^a - 1: a, a(a-1)/2, a(a-1)(a-2)/6.
     c1: f64,
     c2: f64,
@@ -42,8 +41,7 @@ impl Term for Fourtakas {
         let a = 1.0 / eos.gamma;
         Self {
             scale: Scale::new(p, c),
-            gx_b: eos.rho0 * g.x / eos.b,
-            gy_b: eos.rho0 * g.y / eos.b,
+            g_b: g.to_array().map(|g| eos.rho0 * g / eos.b),
             c1: eos.rho0 * a,
             c2: eos.rho0 * a * (a - 1.0) / 2.0,
             c3: eos.rho0 * a * (a - 1.0) * (a - 2.0) / 6.0,
@@ -65,7 +63,7 @@ impl RateTerm for Fourtakas {
     fn pair_both<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>, rj: &mut Rates<L>) {
         let c = L::splat;
         // u = rho_0 g . x_ji / B, with x_ji = -(dx, dy).
-        let u = L::zero() - (c(self.gx_b) * p.dx + c(self.gy_b) * p.dy);
+        let u = L::zero() - dot(splat(self.g_b), p.x_ij());
         let rho_h = |u: L| u * (c(self.c1) + u * (c(self.c2) + u * c(self.c3)));
         let rho_ji = p.j(Field::Rho) - me.lanes::<L>(Field::Rho);
         let (d, d_ji) = (

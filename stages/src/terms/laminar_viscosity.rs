@@ -10,7 +10,7 @@
 use super::Term;
 use crate::vocab::viscous_v_ij;
 use serde::{Deserialize, Serialize};
-use sph_core::pair::{Field, Fields, Lane, Me, Pair, RateTerm, Rates};
+use sph_core::pair::{dot, scale, Field, Fields, Lane, Me, Pair, RateTerm, Rates};
 use sph_core::sim::Constants;
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -37,7 +37,7 @@ pub struct LaminarViscosity {
 }
 
 impl Term for LaminarViscosity {
-    const READS: Fields = Fields::of(&[Field::Vx, Field::Vy, Field::Rho]);
+    const READS: Fields = Fields::of(&Field::VELOCITY).with(Fields::of(&[Field::Rho]));
     type Params = Params;
     fn check(p: &Params) -> Result<(), sph_core::ParamError> {
         super::check_non_negative(&[("nu", p.nu)])
@@ -68,18 +68,16 @@ impl RateTerm for LaminarViscosity {
     #[inline(always)]
     fn pair_both<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>, rj: &mut Rates<L>) {
         let c = L::splat;
-        let (wx, wy) = viscous_v_ij(p, me, self.shear);
-        let x_grad = p.dx * p.gx + p.dy * p.gy;
+        let w = viscous_v_ij(p, me, self.shear);
+        let x_grad = dot(p.x_ij(), p.grad());
         let rho_ij = me.lanes::<L>(Field::Rho) * p.j(Field::Rho);
         let k = c(self.mu_sum) * x_grad / (rho_ij * (p.r * p.r + c(self.eta2)));
         let mk = p.j(Field::Mass) * k;
-        r.ax = r.ax + mk * wx;
-        r.ay = r.ay + mk * wy;
-        let w2 = wx * wx + wy * wy;
+        r.add_acc(scale(mk, w));
+        let w2 = dot(w, w);
         r.power = r.power - mk * w2;
         let mki = me.lanes::<L>(Field::Mass) * k;
-        rj.ax = rj.ax - mki * wx;
-        rj.ay = rj.ay - mki * wy;
+        rj.sub_acc(scale(mki, w));
         rj.power = rj.power - mki * w2;
     }
 }

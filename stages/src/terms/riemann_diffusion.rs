@@ -17,7 +17,7 @@
 use super::riemann::states;
 use super::Term;
 use serde::{Deserialize, Serialize};
-use sph_core::pair::{Field, Fields, Lane, Me, Pair, RateTerm, Rates};
+use sph_core::pair::{dot, splat, Field, Fields, Lane, Me, Pair, RateTerm, Rates};
 use sph_core::sim::Constants;
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -39,8 +39,7 @@ impl Default for Params {
 #[derive(Clone, Copy, Debug, Default)]
 pub struct RiemannDiffusion {
     /// rho_0 g, or 0 without the hydrostatic correction [kg/m^2/s^2].
-    rho_gx: f64,
-    rho_gy: f64,
+    rho_g: [f64; sph_core::dim::DIM],
     /// See `RiemannPressure::tiny`.
     tiny: f64,
 }
@@ -56,8 +55,7 @@ impl Term for RiemannDiffusion {
             0.0
         };
         Self {
-            rho_gx: s * c.gravity.x,
-            rho_gy: s * c.gravity.y,
+            rho_g: c.gravity.to_array().map(|g| s * g),
             tiny: 1e-9 * c.h,
         }
     }
@@ -80,8 +78,8 @@ impl RateTerm for RiemannDiffusion {
         let c = L::splat;
         let s = states(me, p);
         // (p_i - p_j) less its hydrostatic part p_i - p_j = -rho_0 g . x_ji = rho_0 g . x_ij.
-        let dp = s.p_i - s.p_j - (c(self.rho_gx) * p.dx + c(self.rho_gy) * p.dy);
-        let x_grad = p.dx * p.gx + p.dy * p.gy;
+        let dp = s.p_i - s.p_j - dot(splat(self.rho_g), p.x_ij());
+        let x_grad = dot(p.x_ij(), p.grad());
         let t = dp * x_grad / (s.rho_i * s.rho_j * s.rhobar * s.cbar * p.r.max(c(self.tiny)));
         ri.diffusion = ri.diffusion + s.rho_i * s.rho_i * p.j(Field::Mass) * t;
         rj.diffusion = rj.diffusion - s.rho_j * s.rho_j * me.lanes::<L>(Field::Mass) * t;

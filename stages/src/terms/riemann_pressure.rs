@@ -21,7 +21,7 @@ use super::riemann::states;
 use super::Term;
 use crate::vocab::viscous_v_ij;
 use serde::{Deserialize, Serialize};
-use sph_core::pair::{Field, Fields, Lane, Me, Pair, RateTerm, Rates};
+use sph_core::pair::{dot, Field, Fields, Lane, Me, Pair, RateTerm, Rates};
 use sph_core::sim::Constants;
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -50,7 +50,7 @@ pub struct RiemannPressure {
 
 impl Term for RiemannPressure {
     const READS: Fields =
-        Fields::of(&[Field::Vx, Field::Vy, Field::Rho, Field::PRho2, Field::Sound]);
+        Fields::of(&Field::VELOCITY).with(Fields::of(&[Field::Rho, Field::PRho2, Field::Sound]));
     type Params = Params;
     fn check(p: &Params) -> Result<(), sph_core::ParamError> {
         if p.limiter >= 0.0 && p.limiter <= 100.0 {
@@ -91,15 +91,15 @@ impl RateTerm for RiemannPressure {
     fn pair_both<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>, rj: &mut Rates<L>) {
         let c = L::splat;
         let s = states(me, p);
-        let (wx, wy) = viscous_v_ij(p, me, self.shear);
+        let w = viscous_v_ij(p, me, self.shear);
         // U_ij = v_ij . x_ji / r: positive when the pair approaches.
-        let u = (L::zero() - (wx * p.dx + wy * p.dy)) / p.r.max(c(self.tiny));
+        let u = (L::zero() - dot(w, p.x_ij())) / p.r.max(c(self.tiny));
         // min(eta max(U, 0), cbar) as -max(-eta max(U, 0), -cbar): lanes have no min.
         let beta = L::zero() - (L::zero() - c(self.eta) * u.max(L::zero())).max(L::zero() - s.cbar);
         let inv = c(1.0) / (s.rho_i * s.rho_j);
         let dissipation = s.rhobar * beta * u * inv;
         r.coef = r.coef + (s.p_i + s.p_j) * inv + dissipation;
-        let rate = dissipation * (wx * p.gx + wy * p.gy);
+        let rate = dissipation * dot(w, p.grad());
         r.power = r.power + p.j(Field::Mass) * rate;
         rj.power = rj.power + me.lanes::<L>(Field::Mass) * rate;
     }

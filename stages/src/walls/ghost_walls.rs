@@ -1,7 +1,9 @@
 //! Mirrored ghost-particle walls (docs/physics.md, "Walls: mirrored ghost particles").
 //!
 //! Every fluid particle within one kernel support of a wall is mirrored across it; near
-//! a corner where two walls meet it is also mirrored across both (the double mirror).
+//! a corner where two walls meet it is also mirrored across both (the double mirror);
+//! in 3D the same near an edge where two walls meet, and near a vertex where three
+//! meet across all three (the triple mirror).
 //! A ghost carries the mirrored position, the source's mass, a mirrored velocity and the
 //! source's density, optionally corrected hydrostatically so the ghost's pressure is
 //! p_i + rho_0 (g - a_w) . (x_ghost - x_i). Ghost entities are kept in their own
@@ -27,12 +29,12 @@
 //! gravity g - a_w of the tank frame, a_w the tank's rigid acceleration at the source.
 
 use crate::vocab::{ghost_density, GhostReflections, GhostSettings, NoSlipSigns, NoSlipVelocity};
-use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure, Velocity};
 use sph_core::contract::Access;
+use sph_core::dim::Vector;
 use sph_core::pair::Columns;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
@@ -87,8 +89,20 @@ pub struct GhostWalls {
     /// between steps: no per-step allocation once they have reached their size).
     images: Vec<Image>,
     chunks: Vec<Vec<Image>>,
-    /// When the ghosts were found: the fluid count and the walls' end points.
-    built: Option<(usize, Vec<(DVec2, DVec2)>)>,
+    /// When the ghosts were found: the fluid count and the walls' corner points.
+    built: Option<(usize, Vec<[Vector; POINTS]>)>,
+}
+
+/// A wall's corner points: its two ends in 2D, the rectangle's four vertices in 3D (a
+/// rigid motion moves no point of a wall farther than the farthest of these).
+const POINTS: usize = 2 * (sph_core::dim::DIM - 1);
+
+/// `w`'s corner points ([`POINTS`]).
+fn points(w: &WallPose) -> [Vector; POINTS] {
+    #[cfg(not(feature = "dim3"))]
+    return [w.a, w.b];
+    #[cfg(feature = "dim3")]
+    return [w.a, w.b, w.c, w.b + w.c - w.a];
 }
 
 /// A particle closer to a wall than this fraction of ds gets no ghost across it. A
@@ -101,12 +115,25 @@ const ON_WALL: f64 = 1e-6;
 /// Fluid particles per parallel chunk when finding the ghosts.
 const CHUNK: usize = 1024;
 
-/// One ghost to place: its source and the walls it is mirrored across.
+/// One ghost to place: its source and the walls it is mirrored across (a third at a
+/// vertex, in 3D).
 #[derive(Clone, Copy)]
 struct Image {
     source: u32,
     first: u16,
     second: Option<u16>,
+    #[cfg(feature = "dim3")]
+    third: Option<u16>,
+}
+
+impl Image {
+    /// The walls it is mirrored across, in order.
+    fn walls(&self) -> impl Iterator<Item = u16> {
+        let more = self.second;
+        #[cfg(feature = "dim3")]
+        let more = more.into_iter().chain(self.third);
+        std::iter::once(self.first).chain(more)
+    }
 }
 
 impl Stage for GhostWalls {
@@ -125,6 +152,13 @@ impl Stage for GhostWalls {
         sim.resources.insert(GhostSettings {
             hydrostatic: self.params.hydrostatic,
         });
+        #[cfg(feature = "dim3")]
+        if self.params.slip == Slip::NoSlip {
+            return Err(SetupError::new(
+                "ghost_walls",
+                "`slip: NoSlip` is not yet built in 3D: use `slip: FreeSlip`",
+            ));
+        }
         if self.params.slip == Slip::NoSlip {
             sim.resources.insert(NoSlipSigns::default());
             sim.resources
@@ -143,6 +177,8 @@ impl Stage for GhostWalls {
         for img in &self.images {
             e.u32(img.first as u32);
             e.u32(img.second.map_or(u32::MAX, u32::from));
+            #[cfg(feature = "dim3")]
+            e.u32(img.third.map_or(u32::MAX, u32::from));
         }
         let (n_fluid, walls) = self
             .built
@@ -150,8 +186,8 @@ impl Stage for GhostWalls {
             .map_or((u64::MAX, &[][..]), |(n, w)| (*n as u64, &w[..]));
         e.u64(n_fluid);
         e.u64(walls.len() as u64);
-        for (a, b) in walls {
-            for v in [a.x, a.y, b.x, b.y] {
+        for corners in walls {
+            for v in corners.iter().flat_map(|p| p.to_array()) {
                 e.f64(v);
             }
         }
@@ -165,6 +201,8 @@ impl Stage for GhostWalls {
         for _ in 0..n {
             let first = d.u32()?;
             let second = d.u32()?;
+            #[cfg(feature = "dim3")]
+            let third = d.u32()?;
             let wall = |w: u32| {
                 u16::try_from(w)
                     .map_err(|_| sph_core::StateError::Mismatch(format!("ghost wall {w}")))
@@ -173,14 +211,21 @@ impl Stage for GhostWalls {
                 source: 0,
                 first: wall(first)?,
                 second: (second != u32::MAX).then(|| wall(second)).transpose()?,
+                #[cfg(feature = "dim3")]
+                third: (third != u32::MAX).then(|| wall(third)).transpose()?,
             });
         }
         let n_fluid = d.u64()?;
-        let count = d.len(32)?;
+        let count = d.len(8 * sph_core::dim::DIM * POINTS)?;
         let mut walls = Vec::with_capacity(count);
         for _ in 0..count {
-            let (ax, ay, bx, by) = (d.f64()?, d.f64()?, d.f64()?, d.f64()?);
-            walls.push((DVec2::new(ax, ay), DVec2::new(bx, by)));
+            let mut corners = [Vector::ZERO; POINTS];
+            for p in &mut corners {
+                for k in 0..sph_core::dim::DIM {
+                    p[k] = d.f64()?;
+                }
+            }
+            walls.push(corners);
         }
         self.built = (n_fluid != u64::MAX).then_some((n_fluid as usize, walls));
         d.end()
@@ -213,7 +258,7 @@ impl Stage for GhostWalls {
         self.mirror(sim, true)?;
         self.built = Some((
             count::<Fluid>(&sim.world),
-            self.walls.now().iter().map(|w| (w.a, w.b)).collect(),
+            self.walls.now().iter().map(points).collect(),
         ));
         if let Some(nb) = sim.resources.get_mut::<Neighbours>().filter(|_| skin > 0.0) {
             nb.plan = ListPlan::Rebuild;
@@ -264,10 +309,11 @@ impl GhostWalls {
         *n_fluid == count::<Fluid>(&sim.world)
             && self.images.len() == count::<Ghost>(&sim.world)
             && walls.len() == self.walls.now().len()
-            && walls
-                .iter()
-                .zip(self.walls.now())
-                .all(|((a, b), w)| a.distance(w.a) <= half && b.distance(w.b) <= half)
+            && walls.iter().zip(self.walls.now()).all(|(then, w)| {
+                then.iter()
+                    .zip(points(w))
+                    .all(|(p, q)| p.distance(q) <= half)
+            })
     }
 
     /// Places every ghost at its source's mirror image across its walls, with the
@@ -279,6 +325,7 @@ impl GhostWalls {
         let images = &self.images[..];
         // Only when a stage asked for them (the DFSPH solves); the walls move with the
         // tank, so every step.
+        #[cfg(not(feature = "dim3"))]
         if let Some(r) = sim.resources.get_mut::<GhostReflections>() {
             let lines = self.walls.lines();
             r.0.clear();
@@ -296,7 +343,7 @@ impl GhostWalls {
         let columns = sim.resources.get_mut::<Columns>();
         let mut no_slip = columns.and_then(|c| c.remove::<NoSlipVelocity>());
         if let Some(ns) = &mut no_slip {
-            ns.resize(images.len(), DVec2::ZERO);
+            ns.resize(images.len(), Default::default());
         }
         let result = self.mirror_into(sim, renew, no_slip.as_deref_mut());
         if let Some(ns) = no_slip {
@@ -313,7 +360,7 @@ impl GhostWalls {
         &self,
         sim: &mut Sim,
         renew: bool,
-        no_slip: Option<&mut [DVec2]>,
+        no_slip: Option<&mut [glam::DVec2]>,
     ) -> Result<(), StepError> {
         let images = &self.images[..];
         let Some(fluid) = archetype::<Fluid>(&sim.world) else {
@@ -366,7 +413,7 @@ impl GhostWalls {
                 let s = g.source as usize;
                 let (mut pos, mut vel) = (fx[s].0, fv[s].0);
                 let mut active = true;
-                for k in std::iter::once(img.first).chain(img.second) {
+                for k in img.walls() {
                     let k = k as usize;
                     active &= near(&lines[k], fx[s].0);
                     vel = mirror_velocity(&lines[k], &walls[k], pos, vel, Slip::FreeSlip);
@@ -378,6 +425,8 @@ impl GhostWalls {
                 let body = walls[img.first as usize].body;
                 rho.0 = ghost_density(fr[s].0, fx[s].0, pos, correction.map(|c| (c, body)));
             });
+        // 3D: refused at setup.
+        #[cfg(not(feature = "dim3"))]
         if let Some(ns) = no_slip {
             // The source from the ghost column: a particle sort renumbers it there
             // (`sort_particles`), not in `images`, while the ghosts are kept.
@@ -388,7 +437,7 @@ impl GhostWalls {
                 .for_each(|((out, g), img)| {
                     let s = g.source as usize;
                     let (mut pos, mut vel) = (fx[s].0, fv[s].0);
-                    for k in std::iter::once(img.first).chain(img.second) {
+                    for k in img.walls() {
                         let k = k as usize;
                         vel = mirror_velocity(&lines[k], &walls[k], pos, vel, Slip::NoSlip);
                         pos = lines[k].mirror(pos);
@@ -396,6 +445,8 @@ impl GhostWalls {
                     *out = vel;
                 });
         }
+        #[cfg(feature = "dim3")]
+        let _ = no_slip;
         Ok(())
     }
 
@@ -412,6 +463,22 @@ impl GhostWalls {
         let lines = self.walls.lines();
         let corners = self.walls.corners();
         let near = near_rule(sim, skin);
+        // In 3D, the vertices: three walls each pair of which meets at an edge.
+        #[cfg(feature = "dim3")]
+        let vertices: Vec<[usize; 3]> = corners
+            .iter()
+            .flat_map(|c| {
+                corners.iter().filter_map(move |d| {
+                    let meets = |u: usize, v: usize| {
+                        corners
+                            .iter()
+                            .any(|e| (e.first, e.second) == (u.min(v), u.max(v)))
+                    };
+                    (d.first == c.first && d.second > c.second && meets(c.second, d.second))
+                        .then_some([c.first, c.second, d.second])
+                })
+            })
+            .collect();
         self.chunks.resize_with(pos.len().div_ceil(CHUNK), Vec::new);
         self.chunks.truncate(pos.len().div_ceil(CHUNK));
         pos.par_chunks(CHUNK)
@@ -427,6 +494,8 @@ impl GhostWalls {
                                 source,
                                 first: w as u16,
                                 second: None,
+                                #[cfg(feature = "dim3")]
+                                third: None,
                             });
                         }
                     }
@@ -437,6 +506,19 @@ impl GhostWalls {
                                 source,
                                 first: a as u16,
                                 second: Some(b as u16),
+                                #[cfg(feature = "dim3")]
+                                third: None,
+                            });
+                        }
+                    }
+                    #[cfg(feature = "dim3")]
+                    for &[a, b, v] in &vertices {
+                        if [a, b, v].iter().all(|&k| near(&lines[k], x.0)) {
+                            out.push(Image {
+                                source,
+                                first: a as u16,
+                                second: Some(b as u16),
+                                third: Some(v as u16),
                             });
                         }
                     }
@@ -453,18 +535,24 @@ impl GhostWalls {
 /// and over it, with a `skin` of margin (0 for the rule itself). A particle on the
 /// wall (closer than `ON_WALL` ds) is its own mirror image: a ghost there would count
 /// its mass twice for its neighbours.
-fn near_rule(sim: &Sim, skin: f64) -> impl Fn(&WallLine, DVec2) -> bool + Sync {
+fn near_rule(sim: &Sim, skin: f64) -> impl Fn(&WallLine, Vector) -> bool + Sync {
     let support = sim.constants.support();
     let on_wall = ON_WALL * sim.constants.spacing;
-    move |w: &WallLine, x: DVec2| {
+    move |w: &WallLine, x: Vector| {
         let (d, s) = (w.distance(x), w.abscissa(x));
-        d > on_wall - skin && d < support + skin && s >= -skin && s <= w.length + skin
+        let over = s >= -skin && s <= w.length + skin;
+        #[cfg(feature = "dim3")]
+        let over = over && {
+            let t = (x - w.a).dot(w.across);
+            t >= -skin && t <= w.breadth + skin
+        };
+        d > on_wall - skin && d < support + skin && over
     }
 }
 
 /// Velocity of the ghost of a particle at `x` moving at `v`, mirrored across wall `w`
 /// (`line` its geometry) relative to the wall's velocity at the particle's foot on it.
-fn mirror_velocity(line: &WallLine, w: &WallPose, x: DVec2, v: DVec2, slip: Slip) -> DVec2 {
+fn mirror_velocity(line: &WallLine, w: &WallPose, x: Vector, v: Vector, slip: Slip) -> Vector {
     let n = line.normal;
     let vw = w.velocity_at(x - line.distance(x) * n);
     match slip {
@@ -475,10 +563,11 @@ fn mirror_velocity(line: &WallLine, w: &WallPose, x: DVec2, v: DVec2, slip: Slip
 
 /// The linear part of a ghost's `Velocity` mirror (see [`GhostReflections`]): the
 /// product of each crossed wall's I - 2 n n^T, the linear part of [`mirror_velocity`]
-/// with free slip.
+/// with free slip (2D: the DFSPH solves, which use it, are 2D only for now).
+#[cfg(not(feature = "dim3"))]
 fn reflection(lines: &[WallLine], img: &Image) -> [f64; 4] {
     let mut m = [1.0, 0.0, 0.0, 1.0];
-    for k in std::iter::once(img.first).chain(img.second) {
+    for k in img.walls() {
         let n = lines[k as usize].normal;
         let l = [
             1.0 - 2.0 * n.x * n.x,
@@ -525,9 +614,10 @@ fn resize_pool(world: &mut hecs::World, needed: usize) {
     }
 }
 
-#[cfg(test)]
+#[cfg(all(test, not(feature = "dim3")))]
 mod tests {
     use super::*;
+    use glam::DVec2;
 
     fn stage() -> GhostWalls {
         GhostWalls::new(Params::default())

@@ -22,8 +22,8 @@
 //! added over the ghost neighbours alone.
 
 use crate::terms::{continuity, RateTerms};
-use glam::DVec2;
 use sph_core::components::{Density, Mass, Velocity};
+use sph_core::dim::Vector;
 use sph_core::pair::{
     with_records, EquationsOfMotion, Pass, PluginTerm, RateSums, RateTerm, WithPlugins,
 };
@@ -117,7 +117,7 @@ fn power_of<R: RateTerm + Copy>(sim: &mut Sim, terms: R) -> Result<f64, StepErro
 /// The walls' power on fluid particle i (mass `m`, velocity `v`, density `rho`) from
 /// `s`, the rates its ghost neighbours alone give (continuity included).
 #[inline]
-pub(crate) fn particle_power(eos: &Tait, m: f64, v: DVec2, rho: f64, s: &RateSums) -> f64 {
+pub(crate) fn particle_power(eos: &Tait, m: f64, v: Vector, rho: f64, s: &RateSums) -> f64 {
     // A density diffusion's share of the ghost pairs is booked apart
     // (`vocab::DiffusionPower`), so it is taken out here.
     m * (s.acc.dot(v) + eos.pressure(rho) / (rho * rho) * s.drho) + s.power - s.diffusion

@@ -29,6 +29,26 @@ pub struct Rates<L> {
 }
 
 impl<L: Lane> Rates<L> {
+    /// dv_i/dt += a, by component.
+    #[inline(always)]
+    pub fn add_acc(&mut self, a: [L; crate::dim::DIM]) {
+        self.ax = self.ax + a[0];
+        self.ay = self.ay + a[1];
+        #[cfg(feature = "dim3")]
+        {
+            self.az = self.az + a[2];
+        }
+    }
+    /// dv_i/dt -= a, by component.
+    #[inline(always)]
+    pub fn sub_acc(&mut self, a: [L; crate::dim::DIM]) {
+        self.ax = self.ax - a[0];
+        self.ay = self.ay - a[1];
+        #[cfg(feature = "dim3")]
+        {
+            self.az = self.az - a[2];
+        }
+    }
     /// Every rate 0.
     #[inline(always)]
     pub fn zero() -> Self {

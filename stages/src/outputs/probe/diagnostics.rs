@@ -5,10 +5,10 @@
 
 use super::methods::shepard;
 use super::Params;
-use glam::DVec2;
 use sph_core::components::{
     Acceleration, Density, Mass, NeighbourCount, Position, Velocity, Wall, WallPose,
 };
+use sph_core::dim::Vector;
 use sph_core::motion::Pose;
 use sph_core::sim::Sim;
 use sph_core::stage::StepError;
@@ -17,11 +17,17 @@ use sph_core::world::{column, Particles};
 
 /// M = sum_i m_i (x_i - centre) x (g - a_i), counter-clockwise positive (`Probe`'s
 /// module docs).
-pub fn roll_moment(x: &[Position], a: &[Acceleration], m: &[Mass], centre: DVec2, g: DVec2) -> f64 {
+pub fn roll_moment(
+    x: &[Position],
+    a: &[Acceleration],
+    m: &[Mass],
+    centre: Vector,
+    g: Vector,
+) -> f64 {
     x.iter()
         .zip(a)
         .zip(m)
-        .map(|((x, a), m)| m.0 * (x.0 - centre).perp_dot(g - a.0))
+        .map(|((x, a), m)| m.0 * sph_core::dim::cross_z(x.0 - centre, g - a.0))
         .sum()
 }
 
@@ -118,10 +124,12 @@ pub(super) fn sample(
     Ok(())
 }
 
-#[cfg(test)]
+// 2D set-ups; the 3D build's own tests are in `tests3d` modules.
+#[cfg(all(test, not(feature = "dim3")))]
 mod tests {
     use super::*;
     use crate::outputs::probe::tests::{scene, shepard_sum};
+    use glam::DVec2;
     use sph_core::extremes::{nan_max, nan_min};
     use sph_core::motion::RigidState;
 

@@ -1,7 +1,7 @@
 //! Wave gauges: the free-surface elevation on a vertical line of the tank frame.
 
-use glam::DVec2;
 use sph_core::components::{Density, Mass, Position};
+use sph_core::dim::Vector;
 use sph_core::kernel;
 use sph_core::motion::Pose;
 use sph_core::sim::Sim;
@@ -9,7 +9,8 @@ use sph_core::stage::StepError;
 use sph_core::vocab::Neighbours;
 use sph_core::world::Particles;
 
-/// Wave gauge at tank-frame abscissa `x` (`frame`: the tank's pose when the tank
+/// Wave gauge on the tank-frame vertical line through `foot` (its y is ignored; in 2D
+/// the abscissa x, in 3D the point (x, z)) (`frame`: the tank's pose when the tank
 /// moves, None when the tank frame is the world's): the free surface is the lowest
 /// height y above the bottom (in the tank frame, along the tank's vertical) where the
 /// kernel-interpolated fluid fraction along the vertical line,
@@ -22,7 +23,7 @@ use sph_core::world::Particles;
 pub(super) fn elevation(
     sim: &Sim,
     particles: Particles,
-    x: f64,
+    foot: Vector,
     frame: Option<Pose>,
 ) -> Result<f64, StepError> {
     let Some(nb) = sim.resources.get::<Neighbours>() else {
@@ -36,9 +37,11 @@ pub(super) fn elevation(
     let (xj, rho, m) = (xj.view(), rho.view(), m.view());
     let c = &sim.constants;
     let fraction = |y: f64| {
+        let mut at = foot;
+        at.y = y;
         let at = match frame {
-            Some(pose) => pose.to_world(DVec2::new(x, y)),
-            None => DVec2::new(x, y),
+            Some(pose) => pose.to_world(at),
+            None => at,
         };
         let mut phi = 0.0;
         nb.grid.for_each_near(at, |j| {
@@ -64,10 +67,12 @@ pub(super) fn elevation(
     Ok(y)
 }
 
-#[cfg(test)]
+// 2D set-ups; the 3D build's own tests are in `tests3d` modules.
+#[cfg(all(test, not(feature = "dim3")))]
 mod tests {
     use super::*;
     use crate::outputs::probe::tests::{all, scene};
+    use glam::DVec2;
     use sph_core::motion::RigidState;
 
     /// The gauge's march, written out: the fluid fraction phi(y) = sum_j V_j W_j over
@@ -99,7 +104,13 @@ mod tests {
     }
 
     fn elevation_at(sim: &Sim, x: f64, frame: Option<Pose>) -> f64 {
-        elevation(sim, Particles::of(&sim.world).unwrap(), x, frame).unwrap()
+        elevation(
+            sim,
+            Particles::of(&sim.world).unwrap(),
+            DVec2::new(x, 0.0),
+            frame,
+        )
+        .unwrap()
     }
 
     /// The gauge is its march ([`marched`]) in the world frame and in a displaced,

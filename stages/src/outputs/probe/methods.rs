@@ -12,8 +12,8 @@
 //!
 //! A sensor with no fluid within the kernel support reads 0 (dry).
 
-use glam::DVec2;
 use sph_core::components::{Density, Mass, Position, Pressure};
+use sph_core::dim::Vector;
 use sph_core::extraction::{ExtractionMethod, Site};
 use sph_core::kernel;
 use sph_core::sim::Sim;
@@ -53,7 +53,7 @@ impl ExtractionMethod for Shepard {
 
 /// Shepard interpolation of fluid and ghost pressures at `at`:
 /// p(at) = sum_j p_j W_j V_j / sum_j W_j V_j, V_j = m_j / rho_j; 0 without neighbours.
-pub(crate) fn shepard(sim: &Sim, particles: Particles, at: DVec2) -> Result<f64, StepError> {
+pub(crate) fn shepard(sim: &Sim, particles: Particles, at: Vector) -> Result<f64, StepError> {
     let Some(nb) = sim.resources.get::<Neighbours>() else {
         return Ok(0.0);
     };
@@ -204,10 +204,12 @@ impl ExtractionMethod for Averaged {
     }
 }
 
-#[cfg(test)]
+// 2D set-ups; the 3D build's own tests are in `tests3d` modules.
+#[cfg(all(test, not(feature = "dim3")))]
 mod tests {
     use super::*;
     use crate::outputs::probe::tests::{all, scene, shepard_sum, wall, N_FLUID};
+    use glam::DVec2;
     use sph_core::components::{Fluid, Velocity, WallPose};
     use sph_core::extraction::Carry;
 
