@@ -125,6 +125,11 @@ mod tests {
         assert_eq!(rotate_z(quarter, xy(0.0, 2.0)), xy(-2.0, 0.0));
         assert_eq!(z_cross(xy(3.0, 4.0)), xy(-4.0, 3.0));
         assert_eq!(in_xy(xy(3.0, 4.0)), xy(3.0, 4.0));
+        // (1, 2) x (3, 5) = 1 5 - 2 3; x x y = 1, y x x = -1.
+        assert_eq!(cross_z(xy(1.0, 2.0), xy(3.0, 5.0)), -1.0);
+        assert_eq!(cross_z(xy(1.0, 0.0), xy(0.0, 1.0)), 1.0);
+        assert_eq!(cross_z(xy(0.0, 1.0), xy(1.0, 0.0)), -1.0);
+        assert_eq!(cross_z(xy(2.0, 0.0), xy(0.0, 3.0)), 6.0);
         #[cfg(feature = "dim3")]
         {
             let v = Vector::new(1.0, 2.0, 5.0);
