@@ -4,7 +4,7 @@
 
 use crate::testing::{after_one_step, closed_box_3d, everyone};
 use sph_core::components::{Acceleration, Density, DensityRate, Fluid, Mass, Position, Pressure};
-use sph_core::components::{Ghost, Velocity};
+use sph_core::components::{Ghost, Velocity, Wall};
 use sph_core::dim::Vector;
 use sph_core::kernel::{Kernel, Wendland};
 use sph_core::world::{archetype, column};
@@ -59,6 +59,93 @@ fn a_particle_near_a_vertex_has_seven_images() {
         assert!((u.0 - want).length() < 1e-15, "{} against {want}", u.0);
     }
     assert!(expected.is_empty());
+}
+
+/// Around a solid's edge (two faces meeting with the fluid outside the angle, as a
+/// box's vertical edge), each face's fluid mirrors into the edge's inside, onto the
+/// same lattice sites: each site must carry one massive ghost, not two (the
+/// bisector gives each site to one face, `owned`).
+#[test]
+fn the_inside_of_a_solids_edge_is_filled_once() {
+    let mut world = hecs::World::new();
+    let v = Vector::new;
+    // Faces x = 0.5 (fluid at x < 0.5, over z in 0.5..1) and z = 0.5 (fluid at z <
+    // 0.5, over x in 0.5..1), meeting at the edge x = z = 0.5, y in 0..1.
+    for (name, a, b, c) in [
+        (
+            "face_x",
+            v(0.5, 1.0, 0.5),
+            v(0.5, 1.0, 1.0),
+            v(0.5, 0.0, 0.5),
+        ),
+        (
+            "face_z",
+            v(0.5, 0.0, 0.5),
+            v(1.0, 0.0, 0.5),
+            v(0.5, 1.0, 0.5),
+        ),
+    ] {
+        let rest = Wall {
+            name: name.into(),
+            a,
+            b,
+            c,
+            body: Default::default(),
+        };
+        let now = rest.at_rest();
+        world.spawn((rest, now));
+    }
+    // Lattice sites ds/2 off the planes, three deep, in front of either face.
+    let ds = 0.01;
+    let at = |k: i32| 0.5 + (k as f64 + 0.5) * ds;
+    let mut sources = Vec::new();
+    for i in -3..3 {
+        for k in -3..3 {
+            if i < 0 || k < 0 {
+                sources.push(v(at(i), 0.5, at(k)));
+            }
+        }
+    }
+    for x in &sources {
+        world.spawn((
+            Fluid,
+            Position(*x),
+            Velocity(Vector::ZERO),
+            Density(1000.0),
+            Pressure(0.0),
+            Mass(1e-3),
+        ));
+    }
+    let sim = after_one_step(world, &[("ghost_walls", "(hydrostatic: false)")]);
+    let ghosts = archetype::<Ghost>(&sim.world).unwrap();
+    let (gx, gm) = (
+        column::<Position>(ghosts).unwrap(),
+        column::<Mass>(ghosts).unwrap(),
+    );
+    let inside: Vec<Vector> = gx
+        .iter()
+        .zip(gm.iter())
+        .filter(|(p, m)| m.0 > 0.0 && p.0.x > 0.5 && p.0.z > 0.5)
+        .map(|(p, _)| p.0)
+        .collect();
+    // Within the support (2.6 ds) of both faces' fluid: the sites (i, k) >= 0 whose
+    // mirrored source was near its face, i.e. every site with i, k in 0..3.
+    let mut expected: Vec<Vector> = (0..3)
+        .flat_map(|i| (0..3).map(move |k| (i, k)))
+        .map(|(i, k)| v(at(i), 0.5, at(k)))
+        .collect();
+    assert_eq!(
+        inside.len(),
+        expected.len(),
+        "massive ghosts inside: {inside:?}"
+    );
+    for p in inside {
+        let k = expected
+            .iter()
+            .position(|e| (*e - p).length() < 1e-12)
+            .unwrap_or_else(|| panic!("a second massive ghost at {p}, or one off the sites"));
+        expected.remove(k);
+    }
 }
 
 /// A jittered block of 6 x 6 x 6 fluid particles with velocities and densities of

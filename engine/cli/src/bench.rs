@@ -22,43 +22,12 @@ use sph_core::world::{count, Particles};
 use sph_run::runner::{run_keeping_state, RunOptions};
 use sph_scenario::overrides::Override;
 use sph_scenario::Scenario;
-use std::alloc::{GlobalAlloc, Layout, System};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-/// A counting global allocator: live and peak heap bytes, independent of how the
-/// system allocator returns memory to the OS. The `engine` and `sph-bench` binaries
-/// install it (`#[global_allocator]` in their main.rs); a binary that does not
-/// reports heap figures of 0. Cost: two relaxed atomic operations per allocation,
-/// and the engine does not allocate per step.
-pub struct CountingAlloc;
-
-static LIVE: AtomicUsize = AtomicUsize::new(0);
-static PEAK: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for CountingAlloc {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        // SAFETY: forwarded unchanged to the system allocator.
-        let p = unsafe { System.alloc(layout) };
-        if !p.is_null() {
-            let live = LIVE.fetch_add(layout.size(), Ordering::Relaxed) + layout.size();
-            PEAK.fetch_max(live, Ordering::Relaxed);
-        }
-        p
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.dealloc(ptr, layout) };
-        LIVE.fetch_sub(layout.size(), Ordering::Relaxed);
-    }
-}
-
-/// (live, peak) heap bytes counted by [`CountingAlloc`] (zeros when not installed).
-pub fn heap_bytes() -> (usize, usize) {
-    (LIVE.load(Ordering::Relaxed), PEAK.load(Ordering::Relaxed))
-}
+pub use sph_alloc::{heap_bytes, CountingAlloc};
 
 /// Options of `engine bench`.
 #[derive(clap::Args, Debug, Clone)]
@@ -347,7 +316,17 @@ pub fn run_case(
         "ends a benchmark run after a fixed number of steps",
         |p: StopParams| Ok(BenchStop { steps: p.steps }),
     );
+    #[cfg(not(feature = "dim3"))]
     let across = ((2 * case.particles) as f64).sqrt().round() as usize;
+    // 3D: n across the first block's width gives n^3 (height/width)(breadth/width).
+    #[cfg(feature = "dim3")]
+    let across = {
+        let sets = crate::parse_sets(sets)?;
+        let probe = Scenario::from_str(&text, &scenario.display().to_string(), &sets, &registry)?;
+        let size = probe.spec.fluid_blocks[0].size;
+        let shape = size.1 .0 * size.2 .0 / (size.0 .0 * size.0 .0);
+        (case.particles as f64 / shape).cbrt().round().max(2.0) as usize
+    };
     let mut overrides: Vec<String> = vec![format!("resolution=ParticlesAcross({across})")];
     // Append BenchStop as the pipeline's last entry: before the file's last `]`.
     let at = text.rfind(']').ok_or(BenchError::NoPipeline)?;

@@ -129,6 +129,46 @@ pub fn main_with(registry: StageRegistry) -> ExitCode {
     })
 }
 
+/// The space dimensions a command line (the program's name first) asks for: those of
+/// the scenario it runs or benches (its `dimensions` field, after `--set`), of the run
+/// folder it resumes (its checkpoint's), or of a study's base scenario; 2 when it names
+/// none or it cannot be read (the 2D build then reports what is wrong). The `engine`
+/// binary runs the build of that dimension.
+pub fn dimensions_asked<I, T>(args: I) -> u32
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    let Ok(cli) = Cli::try_parse_from(args) else {
+        return 2;
+    };
+    let of_file = |path: &std::path::Path, sets: &[String]| {
+        let overrides = parse_sets(sets).unwrap_or_default();
+        std::fs::read_to_string(path).map_or(2, |t| sph_scenario::dimensions_of(&t, &overrides))
+    };
+    match &cli.command {
+        None => cli
+            .run
+            .scenario
+            .as_deref()
+            .map_or(2, |p| of_file(p, &cli.run.sets)),
+        Some(Command::Resume(a)) => sph_core::checkpoint::dimensions_in(&a.dir).unwrap_or(2),
+        Some(Command::Bench(a)) => of_file(&a.scenario, &a.sets),
+        Some(Command::Study(a)) => std::fs::read_to_string(&a.study)
+            .ok()
+            .and_then(|t| {
+                sph_scenario::scenario::parse_ron::<sph_study::study::StudySpec>(&t, "").ok()
+            })
+            .map_or(2, |spec| {
+                let dir = a.study.parent().unwrap_or(std::path::Path::new("."));
+                let mut sets = spec.set.clone();
+                sets.extend(a.sets.iter().cloned());
+                of_file(&dir.join(&spec.scenario), &sets)
+            }),
+        Some(Command::Stages) => 2,
+    }
+}
+
 /// Exit code of a run stopped by Ctrl-C (128 + SIGINT), after its checkpoint.
 pub const INTERRUPTED: u8 = 130;
 
@@ -279,6 +319,11 @@ pub fn run_scenario(args: &RunArgs, registry: &StageRegistry) -> Result<ExitCode
 fn execute(scenario: Scenario, opts: &RunOptions) -> Result<ExitCode, CliError> {
     let out_dir = &opts.out_dir;
     let waves = sph_study::waves::WaveTheory::from_scenario(&scenario);
+    let reference = scenario
+        .spec
+        .reference
+        .clone()
+        .zip(scenario.reference_file());
     // A failed step still has a summary to print; any other failure has none.
     let (summary, stopped) = match run(scenario, opts) {
         Ok(summary) => (summary, None),
@@ -306,6 +351,15 @@ fn execute(scenario: Scenario, opts: &RunOptions) -> Result<ExitCode, CliError> 
     }
     if let (Some(waves), true) = (&waves, summary.status == "completed") {
         report_waves(waves, out_dir)?;
+    }
+    // Also for a run that stopped: the comparison up to where it got.
+    if let Some((spec, file)) = &reference {
+        let probes = out_dir.join("probes.csv");
+        if probes.exists() {
+            let report = sph_study::reference::compare_files(spec, file, &probes)?;
+            report.write(out_dir)?;
+            println!("{} (reference.md)", report.summary());
+        }
     }
     let interrupted = summary.status.starts_with("interrupted");
     match stopped {

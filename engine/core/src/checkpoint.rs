@@ -265,6 +265,21 @@ pub fn write(dir: &Path, bytes: &[u8]) -> Result<(), CheckpointError> {
     Ok(())
 }
 
+/// The space dimensions of the checkpoints in run folder `dir` (2 or 3, by their
+/// files' magic), the newest file first; `None` when neither file has a checkpoint's
+/// magic (the reader of either build then says what is wrong).
+pub fn dimensions_in(dir: &Path) -> Option<u32> {
+    [LATEST, PREVIOUS].iter().find_map(|name| {
+        let mut head = [0u8; 8];
+        let mut file = std::fs::File::open(dir.join(name)).ok()?;
+        std::io::Read::read_exact(&mut file, &mut head).ok()?;
+        MAGICS
+            .iter()
+            .position(|m| **m == head)
+            .map(|k| k as u32 + 2)
+    })
+}
+
 /// Reads the newest usable checkpoint in `dir`. Returns it with notes for the user: a
 /// leftover temporary file (removed), or a damaged newest checkpoint (renamed to
 /// `checkpoint.bin.damaged`) and the fallback to the previous one.

@@ -22,6 +22,15 @@ pub type Vector = glam::DVec2;
 #[cfg(feature = "dim3")]
 pub type Vector = glam::DVec3;
 
+/// A point or vector as a scenario file writes it: `(x, y)`, or `(x, y, z)` in 3D
+/// (converts to and from [`Vector`] with `into`).
+#[cfg(not(feature = "dim3"))]
+pub type Coords = (f64, f64);
+/// A point or vector as a scenario file writes it: `(x, y)`, or `(x, y, z)` in 3D
+/// (converts to and from [`Vector`] with `into`).
+#[cfg(feature = "dim3")]
+pub type Coords = (f64, f64, f64);
+
 /// `two` in 2D, `three` in 3D: for a constant that differs by dimension (a kernel's
 /// normalisation), so both values stand side by side where it is defined.
 #[inline(always)]

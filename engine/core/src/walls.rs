@@ -95,12 +95,14 @@ impl WallLine {
     pub fn abscissa(&self, x: Vector) -> f64 {
         (x - self.a).dot(self.tangent)
     }
-    /// Whether `x` is behind the wall while alongside it, end points included (it has
-    /// crossed it). With the end points excluded a particle placed exactly on a
-    /// corner, or sliding down a wall onto the corner, was behind neither wall there
-    /// and left the tank unseen.
+    /// Whether `x` is behind the wall by less than `reach` while alongside it, end
+    /// points included (it has crossed it). With the end points excluded a particle
+    /// placed exactly on a corner, or sliding down a wall onto the corner, was behind
+    /// neither wall there and left the tank unseen. The reach keeps a solid's far side
+    /// from counting a particle across the solid as behind it (a box's faces): a
+    /// particle crosses a wall by a fraction of a kernel support in a step.
     #[inline(always)]
-    pub fn behind(&self, x: Vector) -> bool {
+    pub fn behind(&self, x: Vector, reach: f64) -> bool {
         let s = self.abscissa(x);
         let alongside = s >= 0.0 && s <= self.length;
         #[cfg(feature = "dim3")]
@@ -108,7 +110,8 @@ impl WallLine {
             let t = (x - self.a).dot(self.across);
             t >= 0.0 && t <= self.breadth
         };
-        self.distance(x) < 0.0 && alongside
+        let d = self.distance(x);
+        d < 0.0 && d > -reach && alongside
     }
     /// Mirror image of `x` across the line.
     #[inline(always)]
@@ -185,25 +188,47 @@ impl Walls {
         self.now[corner.end_of].edge(corner.edge)
     }
 
-    /// Whether `x` is on the fluid side of every wall's line (a NaN is not): such a
-    /// point has crossed no wall and no corner, since both need it behind a line.
+    /// Whether `x` is, for every wall's line, on its fluid side or at least `reach`
+    /// behind it (a NaN is neither): such a point has crossed no wall and no corner
+    /// ([`Walls::crossed`] with the same reach), since both need it behind a line by
+    /// less than the reach (a corner's edge lies on both lines). Inside a tank every
+    /// point is in front of every line; beside a box, behind the far faces' lines.
     #[inline]
-    pub fn in_front_of_all(&self, x: Vector) -> bool {
-        self.lines.iter().all(|l| l.distance(x) >= 0.0)
+    pub fn clear_of_all(&self, x: Vector, reach: f64) -> bool {
+        self.lines.iter().all(|l| {
+            let d = l.distance(x);
+            d >= 0.0 || d <= -reach
+        })
     }
 
-    /// Where `x` has crossed the walls as they are now: behind a wall while alongside
-    /// it (end points included), else past a convex corner (behind both lines, within
+    /// Where `x` has crossed the walls as they are now: behind a wall by less than
+    /// `reach` while alongside it (end points included), else past a convex corner (behind both lines, within
     /// `reach` of the meeting point); `None` if it has not.
     #[inline]
     pub fn crossed(&self, x: Vector, reach: f64) -> Option<Crossing> {
-        if let Some(k) = self.lines.iter().position(|l| l.behind(x)) {
+        if let Some(k) = (0..self.lines.len()).find(|&k| self.crossed_through(k, x, reach)) {
             return Some(Crossing::Wall(k));
         }
         self.corners
             .iter()
             .find(|c| self.past_corner(c, x, reach))
             .map(|c| Crossing::Corner(*c))
+    }
+
+    /// Whether `x` came in through wall `k`: behind it (within `reach`, alongside it)
+    /// and behind no other wall by less (the earlier wall on a tie). Inside a solid
+    /// (a box) a point is behind every face near it, and it came in through the
+    /// nearest; inside a tank's corner it is alongside one wall only.
+    #[inline]
+    fn crossed_through(&self, k: usize, x: Vector, reach: f64) -> bool {
+        let depth = |j: usize| -self.lines[j].distance(x);
+        self.lines[k].behind(x, reach)
+            && self.lines.iter().enumerate().all(|(j, l)| {
+                j == k
+                    || !l.behind(x, reach)
+                    || depth(j) > depth(k)
+                    || (depth(j) == depth(k) && j > k)
+            })
     }
 
     /// Whether `x` lies behind both lines of the convex `corner`, within `reach` of
@@ -245,8 +270,8 @@ impl Walls {
             }
             hit = true;
         };
-        for (k, line) in self.lines.iter().enumerate() {
-            if line.behind(*x) {
+        for k in 0..self.lines.len() {
+            if self.crossed_through(k, *x, reach) {
                 bounce(k, x);
             }
         }
@@ -643,26 +668,44 @@ mod tests_any {
         assert!((line.distance(x) - 0.2).abs() < 1e-15);
         assert!((line.abscissa(x) - 0.3).abs() < 1e-15);
         assert!((line.mirror(x) - at(0.3, -0.2, 0.4)).length() < 1e-15);
-        assert!(line.behind(at(0.3, -0.01, 0.4)));
-        assert!(line.behind(at(1.0, -0.01, 0.0)), "end points included");
-        assert!(!line.behind(at(1.01, -0.01, 0.4)), "past the end");
-        assert!(!line.behind(at(-0.01, -0.01, 0.4)), "before the start");
-        assert!(!line.behind(x), "in front");
+        assert!(line.behind(at(0.3, -0.01, 0.4), 0.1));
+        assert!(line.behind(at(1.0, -0.01, 0.0), 0.1), "end points included");
+        assert!(!line.behind(at(1.01, -0.01, 0.4), 0.1), "past the end");
+        assert!(!line.behind(at(-0.01, -0.01, 0.4), 0.1), "before the start");
+        assert!(!line.behind(x, 0.1), "in front");
         if DIM == 3 {
-            assert!(!line.behind(at(0.3, -0.01, 1.01)), "beyond the far edge");
-            assert!(!line.behind(at(0.3, -0.01, -0.01)), "before the near edge");
+            assert!(
+                !line.behind(at(0.3, -0.01, 1.01), 0.1),
+                "beyond the far edge"
+            );
+            assert!(
+                !line.behind(at(0.3, -0.01, -0.01), 0.1),
+                "before the near edge"
+            );
         }
+        // Within the reach only: deeper is across a solid, not through its face.
+        assert!(line.behind(at(0.3, -0.099, 0.4), 0.1));
+        assert!(!line.behind(at(0.3, -0.101, 0.4), 0.1), "beyond the reach");
     }
 
     #[test]
-    fn the_set_counts_its_walls_and_who_is_in_front() {
+    fn the_set_counts_its_walls_and_who_is_clear() {
         let set = Walls::of(&world_of([floor(Pose::default()), left()]));
         assert_eq!((set.len(), set.is_empty()), (2, false));
         assert!(Walls::of(&World::new()).is_empty());
-        assert!(set.in_front_of_all(at(0.5, 0.5, 0.5)));
-        assert!(set.in_front_of_all(at(0.0, 0.0, 0.5)), "on both walls");
-        assert!(!set.in_front_of_all(at(0.5, -1e-9, 0.5)));
-        assert!(!set.in_front_of_all(at(-1e-9, 0.5, 0.5)));
+        let reach = 0.1;
+        assert!(set.clear_of_all(at(0.5, 0.5, 0.5), reach));
+        assert!(set.clear_of_all(at(0.0, 0.0, 0.5), reach), "on both walls");
+        assert!(!set.clear_of_all(at(0.5, -1e-9, 0.5), reach));
+        assert!(!set.clear_of_all(at(-1e-9, 0.5, 0.5), reach));
+        // Behind by the reach or more: beyond what a step crosses.
+        assert!(!set.clear_of_all(at(0.5, -0.0999, 0.5), reach));
+        assert!(set.clear_of_all(at(0.5, -0.1, 0.5), reach));
+        assert!(!set.clear_of_all(at(f64::NAN, 0.5, 0.5), reach));
+        // Whatever is clear has crossed nothing.
+        for p in [at(0.5, -0.1, 0.5), at(-0.3, -0.2, 0.5), at(0.5, 0.5, 0.5)] {
+            assert_eq!(set.crossed(p, reach), None, "{p}");
+        }
     }
 
     /// Behind both walls near where they meet: a corner crossing within the reach of
@@ -728,5 +771,39 @@ mod tests_any {
         // The foot (0.5, 0) moves at omega z x r = (0, 1): v_n = -0.3 - 1 = -1.3
         // relative, reversed: -0.3 + 2.6.
         assert!((v - vector(0.1, 2.3, 0.2)).length() < 1e-12, "{v}");
+    }
+
+    /// Inside a box (its faces facing out) a point is behind every face within the
+    /// reach; it came in through the nearest, and goes back out through it alone.
+    #[test]
+    fn a_point_inside_a_box_leaves_through_the_nearest_face() {
+        let rest = Pose::default();
+        let world = world_of([
+            wall("box_left", (0.4, 0.0), (0.4, 0.2), rest),
+            wall("box_top", (0.4, 0.2), (0.6, 0.2), rest),
+            wall("box_right", (0.6, 0.2), (0.6, 0.0), rest),
+        ]);
+        let set = Walls::of(&world);
+        let reach = 0.1;
+        let v0 = at(1.0, -1.0, 0.0) - at(0.0, 0.0, 0.0);
+        // Near the left face, deep below the top: out to the left.
+        let (mut x, mut v) = (at(0.41, 0.15, 0.5), v0);
+        assert_eq!(set.crossed(x, reach), Some(Crossing::Wall(0)));
+        assert!(set.reflect(reach, &mut x, [&mut v]));
+        assert!((x - at(0.39, 0.15, 0.5)).length() < 1e-12, "{x}");
+        assert!((v - (at(-1.0, -1.0, 0.0) - at(0.0, 0.0, 0.0))).length() < 1e-12);
+        // Just under the top, near the left face: out through the top.
+        let (mut x, mut v) = (at(0.45, 0.19, 0.5), v0);
+        assert_eq!(set.crossed(x, reach), Some(Crossing::Wall(1)));
+        assert!(set.reflect(reach, &mut x, [&mut v]));
+        assert!((x - at(0.45, 0.21, 0.5)).length() < 1e-12, "{x}");
+        assert!((v - (at(1.0, 1.0, 0.0) - at(0.0, 0.0, 0.0))).length() < 1e-12);
+        // Near the right face: out to the right.
+        assert_eq!(
+            set.crossed(at(0.58, 0.1, 0.5), reach),
+            Some(Crossing::Wall(2))
+        );
+        // Beyond the reach of every face (the box's middle is 0.1 from each): none.
+        assert_eq!(set.crossed(at(0.5, 0.05, 0.5), 0.04), None);
     }
 }

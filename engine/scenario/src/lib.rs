@@ -7,4 +7,4 @@ mod lexer;
 pub mod overrides;
 pub mod scenario;
 
-pub use scenario::{LoadError, Scenario};
+pub use scenario::{dimensions_of, LoadError, Scenario};

@@ -17,7 +17,6 @@ pub(crate) use positions::*;
 
 use crate::lexer::{lex_lenient, Shape, Tok, Token};
 use crate::overrides::{apply_overrides_traced, source_offset, Override, Patch};
-use glam::DVec2;
 use serde::de::{
     self, DeserializeSeed, Deserializer, EnumAccess, MapAccess, VariantAccess, Visitor,
 };
@@ -25,6 +24,7 @@ use serde::{Deserialize, Serialize};
 use sph_core::components::{BodyPose, Density, Position, Pressure, Velocity, Wall};
 use sph_core::components::{Fluid, Mass, ParticleId, PressureSensor, Tank, WaveGauge};
 use sph_core::contract::{Access, Breach};
+use sph_core::dim::{self, Coords, Vector};
 use sph_core::kernel::KernelKind;
 use sph_core::motion::{Motion, MotionSeries, MotionSpec, Pose, SHORTEST_TIME};
 use sph_core::piston::{Piston, PistonSpec, PISTON_WALL};
@@ -116,6 +116,19 @@ pub fn parse_ron<T: serde::de::DeserializeOwned>(text: &str, file: &str) -> Resu
         .map_err(|e| parse_error(&Doc::new(text), file, &e))
 }
 
+/// The space dimensions scenario `text` (with `overrides` applied) is written for: its
+/// top-level `dimensions` field, or 2 without one. Lenient: text that does not parse
+/// reads as 2, and the loader of that build reports what is wrong with it.
+pub fn dimensions_of(text: &str, overrides: &[Override]) -> u32 {
+    let patched =
+        apply_overrides_traced(text, overrides).map_or_else(|_| text.to_string(), |p| p.0);
+    let doc = Doc::new(&patched);
+    doc.key(&["dimensions"])
+        .and_then(|k| (k + 2 < doc.toks.len()).then(|| doc.name(k + 2).parse().ok()))
+        .flatten()
+        .unwrap_or(2)
+}
+
 impl Scenario {
     /// Reads, patches with `--set` overrides, parses and validates a scenario file.
     pub fn load(
@@ -151,9 +164,25 @@ impl Scenario {
                 field: None,
                 message: e.to_string(),
             })?;
-        let parsed = ron_options().from_str_seed(&patched, ScenarioSeed(registry));
         let doc = Doc::new(&patched);
         let at = Locator { file, doc: &doc };
+        // Before the rest: a scene of the other dimension fails on its first vector.
+        let dimensions = dimensions_of(&patched, &[]);
+        if dimensions as usize != dim::DIM {
+            let how = match dimensions {
+                2 | 3 => format!(
+                    "this is the {}D build; the `engine` command runs each scene in the build its `dimensions` names",
+                    dim::DIM
+                ),
+                _ => "accepted: 2 or 3".into(),
+            };
+            let e = at.field(
+                "dimensions",
+                format!("{dimensions} is not {}: {how}", dim::DIM),
+            );
+            return Err(blame_override(e, &doc, &patches, text));
+        }
+        let parsed = ron_options().from_str_seed(&patched, ScenarioSeed(registry));
         parsed
             .map_err(|e| parse_error(&doc, file, &e))
             .and_then(|spec| validate(spec, &at, PathBuf::from(file)))
@@ -202,31 +231,25 @@ impl Scenario {
             .find_map(|p| p.access.exposed::<T>())
     }
 
-    /// Walls of the scenario: the tank's, the extra ones, then the piston.
+    /// Walls of the scenario: the tank's, the extra ones, the boxes' faces, then the
+    /// piston.
     pub fn walls(&self) -> Vec<Wall> {
         let mut walls = Vec::new();
         if let Some(t) = &self.spec.tank {
-            let (w, h) = (t.width.0, t.height.0);
-            let wall = |name: &str, a: (f64, f64), b: (f64, f64)| Wall {
-                name: name.to_string(),
-                a: DVec2::new(a.0, a.1),
-                b: DVec2::new(b.0, b.1),
-                body: Pose::default(),
-            };
-            walls.push(wall("left", (0.0, h), (0.0, 0.0)));
-            walls.push(wall("bottom", (0.0, 0.0), (w, 0.0)));
-            walls.push(wall("right", (w, 0.0), (w, h)));
-            if !t.open_top {
-                walls.push(wall("top", (w, h), (0.0, h)));
-            }
+            walls.extend(tank_walls(t));
         }
         for s in &self.spec.walls {
             walls.push(Wall {
                 name: s.name.clone(),
                 a: s.from.into(),
                 b: s.to.into(),
+                #[cfg(feature = "dim3")]
+                c: s.across.into(),
                 body: Pose::default(),
             });
+        }
+        for b in &self.spec.boxes {
+            walls.extend(box_faces(b, self.spec.tank.as_ref()));
         }
         if let Some(p) = &self.spec.piston {
             let height = self.spec.tank.as_ref().map_or(0.0, |t| t.height.0);
@@ -235,35 +258,45 @@ impl Scenario {
                 name: PISTON_WALL.into(),
                 a,
                 b,
-                body: Pose::at_rest(DVec2::new(p.x, 0.0)),
+                // 3D: refused at validation.
+                #[cfg(feature = "dim3")]
+                c: a,
+                body: Pose::at_rest(dim::xy(p.x, 0.0)),
             });
         }
         walls
     }
 
-    /// Initial fluid particles: each block filled on a square lattice of spacing ds,
-    /// first row and column ds/2 inside the block, with hydrostatic density
-    /// rho(y) = rho_0 [1 + rho_0 g (H - y)/B]^(1/gamma) and mass rho(y) ds^2 so the
+    /// Initial fluid particles: each block filled on a square (3D: cubic) lattice of
+    /// spacing ds, first row and column ds/2 inside the block, with hydrostatic density
+    /// rho(y) = rho_0 [1 + rho_0 g (H - y)/B]^(1/gamma) and mass rho(y) ds^DIM so the
     /// column starts in equilibrium (docs/analytic.md section 1).
-    pub fn initial_particles(&self) -> Vec<(DVec2, f64, f64)> {
+    pub fn initial_particles(&self) -> Vec<(Vector, f64, f64)> {
         let ds = self.spacing;
         let eos = self.eos();
-        let g = DVec2::from(self.spec.fluid.gravity).length();
+        let g = Vector::from(self.spec.fluid.gravity).length();
         let mut out = Vec::new();
         for b in &self.spec.fluid_blocks {
             // Whole lattice cells only: a rounded-up count would put the last row or
             // column closer than ds/2 to a wall.
-            let nx = (b.size.0 .0 / ds + 1e-9).floor() as usize;
-            let ny = (b.size.1 .0 / ds + 1e-9).floor() as usize;
-            let top = b.min.1 + b.size.1 .0;
-            for j in 0..ny {
-                for i in 0..nx {
-                    let x = DVec2::new(
-                        b.min.0 + (i as f64 + 0.5) * ds,
-                        b.min.1 + (j as f64 + 0.5) * ds,
-                    );
-                    let rho = eos.density(eos.rho0 * g * (top - x.y));
-                    out.push((x, rho, rho * ds * ds));
+            let size = extent(&b.size);
+            let n = |k: usize| (size[k] / ds + 1e-9).floor() as usize;
+            let min = Vector::from(b.min);
+            let top = min.y + size.y;
+            let layers = if dim::DIM == 3 { n(dim::DIM - 1) } else { 1 };
+            for l in 0..layers {
+                for j in 0..n(1) {
+                    for i in 0..n(0) {
+                        let mut x = min + dim::xy((i as f64 + 0.5) * ds, (j as f64 + 0.5) * ds);
+                        if dim::DIM == 3 {
+                            x[dim::DIM - 1] += (l as f64 + 0.5) * ds;
+                        }
+                        let rho = eos.density(eos.rho0 * g * (top - x.y));
+                        // rho ds ds (ds) in this order: 2D's masses as they always were.
+                        let mass = rho * ds * ds;
+                        let mass = if dim::DIM == 3 { mass * ds } else { mass };
+                        out.push((x, rho, mass));
+                    }
                 }
             }
         }
@@ -291,43 +324,66 @@ impl Scenario {
     /// widened by four kernel supports, and for an open tank twice its height upward.
     /// For a moving tank, the box swept by that box over the motion: a disc about the
     /// pivot if it rolls, grown by the largest pivot displacement.
-    pub fn domain(&self) -> (DVec2, DVec2) {
-        let mut lo = DVec2::splat(f64::INFINITY);
-        let mut hi = DVec2::splat(f64::NEG_INFINITY);
+    pub fn domain(&self) -> (Vector, Vector) {
+        let mut lo = Vector::splat(f64::INFINITY);
+        let mut hi = Vector::splat(f64::NEG_INFINITY);
         for w in self.walls() {
             lo = lo.min(w.a).min(w.b);
             hi = hi.max(w.a).max(w.b);
+            #[cfg(feature = "dim3")]
+            {
+                let far = w.b + w.c - w.a;
+                (lo, hi) = (lo.min(w.c).min(far), hi.max(w.c).max(far));
+            }
         }
         for b in &self.spec.fluid_blocks {
-            lo = lo.min(DVec2::from(b.min));
-            hi = hi.max(DVec2::from(b.min) + DVec2::new(b.size.0 .0, b.size.1 .0));
+            lo = lo.min(Vector::from(b.min));
+            hi = hi.max(Vector::from(b.min) + extent(&b.size));
         }
         let margin = 4.0 * self.spec.kernel.support_factor() * self.h;
         let open = self.spec.tank.as_ref().is_none_or(|t| t.open_top);
         let extra_up = if open { hi.y - lo.y } else { 0.0 };
-        let (lo, hi) = (
-            lo - DVec2::splat(margin),
-            hi + DVec2::new(margin, margin + extra_up),
-        );
+        let mut up = Vector::splat(margin);
+        up.y += extra_up;
+        let (lo, hi) = (lo - Vector::splat(margin), hi + up);
         let Some(m) = &self.motion else {
             return (lo, hi);
         };
-        let grow = DVec2::splat(m.max_offset());
+        let grow = Vector::splat(m.max_offset());
         if m.max_angle() == 0.0 {
             return (lo - grow, hi + grow);
         }
-        let corners = [lo, hi, DVec2::new(lo.x, hi.y), DVec2::new(hi.x, lo.y)];
+        // A roll about z: the x-y rectangle's corners' farthest reach from the axis.
+        let corners = [
+            dim::xy(lo.x, lo.y),
+            dim::xy(hi.x, hi.y),
+            dim::xy(lo.x, hi.y),
+            dim::xy(hi.x, lo.y),
+        ];
         let r = corners
             .iter()
-            .map(|c| (*c - m.pivot).length())
+            .map(|c| dim::in_xy(*c - m.pivot).length())
             .fold(0.0, f64::max);
-        let reach = DVec2::splat(r) + grow;
-        (m.pivot - reach, m.pivot + reach)
+        let reach = dim::xy(r, r) + grow;
+        #[cfg(feature = "dim3")]
+        let (lo, hi) = (
+            Vector::new(m.pivot.x, m.pivot.y, lo.z) - reach,
+            Vector::new(m.pivot.x, m.pivot.y, hi.z) + reach,
+        );
+        #[cfg(not(feature = "dim3"))]
+        let (lo, hi) = (m.pivot - reach, m.pivot + reach);
+        (lo, hi)
+    }
+
+    /// The reference data file (`reference.file`, relative to the scenario file).
+    pub fn reference_file(&self) -> Option<PathBuf> {
+        let r = self.spec.reference.as_ref()?;
+        Some(self.source.parent().unwrap_or(Path::new(".")).join(&r.file))
     }
 
     /// The tank's pose at t = 0 (at rest for a fixed tank).
     pub fn initial_pose(&self) -> Pose {
-        let pivot = self.spec.tank.as_ref().map_or(DVec2::ZERO, |t| t.pivot());
+        let pivot = self.spec.tank.as_ref().map_or(Vector::ZERO, |t| t.pivot());
         self.motion
             .as_ref()
             .map_or(Pose::at_rest(pivot), |m| m.pose(0.0))
@@ -356,6 +412,8 @@ impl Scenario {
             let tank = Tank {
                 width: t.width.0,
                 height: t.height.0,
+                #[cfg(feature = "dim3")]
+                breadth: t.breadth.0,
                 pivot: t.pivot(),
             };
             let pose = BodyPose(Pose::at_rest(tank.pivot));
@@ -384,14 +442,19 @@ impl Scenario {
             let Some(&(_, wall)) = wall_entities.iter().find(|(name, _)| *name == s.wall) else {
                 continue;
             };
-            let along = world
+            let at: Vector = s.at.into();
+            let along = world.get::<&Wall>(wall).map_or(0.0, |w| w.abscissa(at));
+            #[cfg(feature = "dim3")]
+            let across = world
                 .get::<&Wall>(wall)
-                .map_or(0.0, |w| w.abscissa(s.at.into()));
+                .map_or(0.0, |w| w.at_rest().abscissa_across(at));
             let width = s.width.map_or(2.0 * self.h, |w| w.0);
             world.spawn((PressureSensor {
                 name: s.name.clone(),
                 wall,
                 along,
+                #[cfg(feature = "dim3")]
+                across,
                 width,
                 diameter: s.diameter.map_or(0.0, |d| d.0),
                 filter: s.filter.map_or(0.0, |f| f.0),
@@ -401,6 +464,8 @@ impl Scenario {
             world.spawn((WaveGauge {
                 name: g.name.clone(),
                 x: g.x,
+                #[cfg(feature = "dim3")]
+                z: g.z,
             },));
         }
         // Everything where its motion has it at t = 0.
@@ -425,6 +490,91 @@ impl Scenario {
             name: self.spec.name.clone(),
             diagnostics: Default::default(),
         }
+    }
+}
+
+/// The walls of tank `t`, facing in: `left`, `bottom`, `right`, in 3D `back` (z = 0)
+/// and `front` (z = breadth), then `top` unless it is open.
+fn tank_walls(t: &TankSpec) -> Vec<Wall> {
+    #[cfg(not(feature = "dim3"))]
+    let size = Vector::new(t.width.0, t.height.0);
+    #[cfg(feature = "dim3")]
+    let size = Vector::new(t.width.0, t.height.0, t.breadth.0);
+    let mut faces = faces(Vector::ZERO, size, true);
+    if t.open_top {
+        faces.retain(|w| w.name != "top");
+    }
+    faces
+}
+
+/// The faces of box `b` facing out, named `<name>_<face>`, without those lying on the
+/// tank's walls (see [`BoxSpec`]).
+pub(crate) fn box_faces(b: &BoxSpec, tank: Option<&TankSpec>) -> Vec<Wall> {
+    let (min, size) = (Vector::from(b.min), extent(&b.size));
+    let on_tank = |w: &Wall| {
+        tank.is_some_and(|t| {
+            tank_walls(t).iter().any(|tw| {
+                let rest = tw.at_rest();
+                #[cfg(not(feature = "dim3"))]
+                let corners = [w.a, w.b];
+                #[cfg(feature = "dim3")]
+                let corners = [w.a, w.b, w.c];
+                corners.iter().all(|&p| rest.distance(p).abs() < 1e-12)
+            })
+        })
+    };
+    let mut faces = faces(min, size, false);
+    faces.retain(|w| !on_tank(w));
+    for w in &mut faces {
+        w.name = format!("{}_{}", b.name, w.name);
+    }
+    faces
+}
+
+/// The faces of the box from `min` of `size`, facing in (`inward`) or out: in 2D
+/// `left`, `bottom`, `right`, `top` as segments whose fluid side is on the left; in 3D
+/// `left`, `bottom`, `right`, `back`, `front`, `top` as rectangles a, b, c whose fluid
+/// side is that of (c - a) x (b - a).
+fn faces(min: Vector, size: Vector, inward: bool) -> Vec<Wall> {
+    let wall = |name: &str, a: Vector, b: Vector, _c: Vector| {
+        let (a, b, _c) = (min + a, min + b, min + _c);
+        // Facing out: the same rectangle with its edges swapped (2D: reversed).
+        #[cfg(not(feature = "dim3"))]
+        let (a, b) = if inward { (a, b) } else { (b, a) };
+        #[cfg(feature = "dim3")]
+        let (b, _c) = if inward { (b, _c) } else { (_c, b) };
+        Wall {
+            name: name.to_string(),
+            a,
+            b,
+            #[cfg(feature = "dim3")]
+            c: _c,
+            body: Pose::default(),
+        }
+    };
+    let (w, h) = (size.x, size.y);
+    let o = Vector::ZERO;
+    #[cfg(not(feature = "dim3"))]
+    {
+        let v = Vector::new;
+        vec![
+            wall("left", v(0.0, h), o, o),
+            wall("bottom", o, v(w, 0.0), o),
+            wall("right", v(w, 0.0), v(w, h), o),
+            wall("top", v(w, h), v(0.0, h), o),
+        ]
+    }
+    #[cfg(feature = "dim3")]
+    {
+        let (v, d) = (Vector::new, size.z);
+        vec![
+            wall("left", v(0.0, h, 0.0), o, v(0.0, h, d)),
+            wall("bottom", o, v(w, 0.0, 0.0), v(0.0, 0.0, d)),
+            wall("right", v(w, 0.0, 0.0), v(w, h, 0.0), v(w, 0.0, d)),
+            wall("back", o, v(0.0, h, 0.0), v(w, 0.0, 0.0)),
+            wall("front", v(0.0, 0.0, d), v(w, 0.0, d), v(0.0, h, d)),
+            wall("top", v(0.0, h, 0.0), v(0.0, h, d), v(w, h, 0.0)),
+        ]
     }
 }
 

@@ -9,6 +9,7 @@ pub use error::StudyError;
 pub mod error;
 pub mod linear_sloshing;
 pub mod parallel;
+pub mod reference;
 pub mod series;
 pub mod study;
 pub mod sweep;

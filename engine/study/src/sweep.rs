@@ -397,7 +397,7 @@ pub fn linear_tank(scenario: &Scenario, f: f64) -> RectangularTank {
         breadth: width,
         depth: (f * width / ds + 1e-9).floor() * ds,
         density: scenario.spec.fluid.density.0,
-        gravity: glam::DVec2::from(scenario.spec.fluid.gravity).length(),
+        gravity: sph_core::dim::Vector::from(scenario.spec.fluid.gravity).length(),
         viscosity: alpha * scenario.h * scenario.sound_speed / 8.0,
     }
 }

@@ -455,9 +455,9 @@ impl Kick<'_> {
         x.0 += dt * vh.0;
         v.0 = vh.0 + 0.5 * dt * a.0;
         rho.0 = rh.0 + 0.5 * dt * r.0;
-        // A particle in front of every wall line has crossed none and needs no
-        // reflection (both tests need it behind a line); most take this way.
-        let clear = self.walls.in_front_of_all(x.0);
+        // A particle in front of every wall line (or far behind it) has crossed none
+        // and needs no reflection; most take this way.
+        let clear = self.walls.clear_of_all(x.0, self.reach);
         let before = (x.0, v.0, rho.0, vh.0, rh.0);
         let hit = self.reflect && !clear && {
             let hit = self

@@ -39,7 +39,7 @@ use sph_core::pair::Columns;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{ListPlan, MirrorWall, Neighbours, WallPose, Walls};
-use sph_core::walls::WallLine;
+use sph_core::walls::{Corner, WallLine};
 use sph_core::world::{archetype, column, column_mut, count};
 use sph_core::StageRegistry;
 
@@ -396,6 +396,9 @@ impl GhostWalls {
         let (walls, lines) = (self.walls.now(), self.walls.lines());
         let entities = self.walls.entities();
         let near = near_rule(sim, 0.0);
+        let corners = self.walls.corners();
+        // A solid's edges the fluid flows around (a box's): see `owned`.
+        let edges = corners.iter().any(|c| !c.convex);
         (
             (&mut gs[..], &mut gw[..]),
             &mut gx[..],
@@ -419,6 +422,7 @@ impl GhostWalls {
                     vel = mirror_velocity(&lines[k], &walls[k], pos, vel, Slip::FreeSlip);
                     pos = lines[k].mirror(pos);
                 }
+                active &= !edges || owned(lines, corners, img, pos);
                 x.0 = pos;
                 v.0 = vel;
                 m.0 = if active { fm[s].0 } else { 0.0 };
@@ -548,6 +552,26 @@ fn near_rule(sim: &Sim, skin: f64) -> impl Fn(&WallLine, Vector) -> bool + Sync 
         };
         d > on_wall - skin && d < support + skin && over
     }
+}
+
+/// Whether a ghost at `g`, mirrored across `img`'s walls, lies in the part of the solid
+/// those walls own. Inside a solid's edge that the fluid flows around (two walls
+/// meeting with the fluid outside the angle, a [`Corner`] that is not convex: a box's
+/// edge) the mirror images of both walls' fluid overlap, and filled by both the edge's
+/// inside weighed twice: each point of it is kept for the wall whose plane is nearer
+/// (the bisector splits it; on it, the first wall's), so it is filled once.
+fn owned(lines: &[WallLine], corners: &[Corner], img: &Image, g: Vector) -> bool {
+    let across = |w: usize| img.walls().any(|k| k as usize == w);
+    corners.iter().filter(|c| !c.convex).all(|c| {
+        let (a, b) = (c.first, c.second);
+        let (da, db) = (lines[a].distance(g), lines[b].distance(g));
+        match (across(a), across(b)) {
+            // On the bisector itself, the first wall's.
+            (true, false) => !(db < 0.0 && db > da),
+            (false, true) => !(da < 0.0 && da >= db),
+            _ => true,
+        }
+    })
 }
 
 /// Velocity of the ghost of a particle at `x` moving at `v`, mirrored across wall `w`

@@ -193,7 +193,7 @@ fn lay_out(rest: &[WallPose], walls: &Walls, ds: f64, layers: usize) -> (Vec<Sit
     let lines: Vec<WallLine> = rest.iter().map(WallLine::of).collect();
     let depth = layers as f64 * ds;
     // In wall k's band: behind its line, within the band's depth, alongside it.
-    let in_band = |k: usize, x: DVec2| lines[k].behind(x) && lines[k].distance(x) > -depth;
+    let in_band = |k: usize, x: DVec2| lines[k].behind(x, depth);
     for (k, line) in lines.iter().enumerate() {
         let n = ((line.length / ds).round() as usize).max(1);
         let along = line.length / n as f64;

@@ -40,6 +40,7 @@ pub(crate) struct ScenarioSeed<'a>(pub(crate) &'a StageRegistry);
 #[derive(Deserialize)]
 #[serde(field_identifier, rename_all = "snake_case")]
 enum Key {
+    Dimensions,
     Name,
     EndTime,
     Fluid,
@@ -48,15 +49,18 @@ enum Key {
     HOverDx,
     Tank,
     Walls,
+    Boxes,
     Piston,
     FluidBlocks,
     PressureSensors,
     WaveGauges,
     Sweep,
+    Reference,
     Pipeline,
 }
 
 const FIELDS: &[&str] = &[
+    "dimensions",
     "name",
     "end_time",
     "fluid",
@@ -65,11 +69,13 @@ const FIELDS: &[&str] = &[
     "h_over_dx",
     "tank",
     "walls",
+    "boxes",
     "piston",
     "fluid_blocks",
     "pressure_sensors",
     "wave_gauges",
     "sweep",
+    "reference",
     "pipeline",
 ];
 
@@ -101,8 +107,10 @@ impl<'de> Visitor<'de> for ScenarioSeed<'_> {
             (None, None, None, None, None);
         let (mut pressure_sensors, mut wave_gauges, mut sweep, mut pipeline) =
             (None, None, None, None);
+        let (mut dimensions, mut boxes, mut reference) = (None, None, None);
         while let Some(key) = map.next_key::<Key>()? {
             match key {
+                Key::Dimensions => take!(dimensions, "dimensions", map.next_value()?),
                 Key::Name => take!(name, "name", map.next_value()?),
                 Key::EndTime => take!(end_time, "end_time", map.next_value()?),
                 Key::Fluid => take!(fluid, "fluid", map.next_value()?),
@@ -115,6 +123,7 @@ impl<'de> Visitor<'de> for ScenarioSeed<'_> {
                 Key::HOverDx => take!(h_over_dx, "h_over_dx", map.next_value()?),
                 Key::Tank => take!(tank, "tank", map.next_value()?),
                 Key::Walls => take!(walls, "walls", map.next_value()?),
+                Key::Boxes => take!(boxes, "boxes", map.next_value()?),
                 Key::Piston => take!(piston, "piston", map.next_value()?),
                 Key::FluidBlocks => take!(fluid_blocks, "fluid_blocks", map.next_value()?),
                 Key::PressureSensors => {
@@ -122,6 +131,7 @@ impl<'de> Visitor<'de> for ScenarioSeed<'_> {
                 }
                 Key::WaveGauges => take!(wave_gauges, "wave_gauges", map.next_value()?),
                 Key::Sweep => take!(sweep, "sweep", map.next_value()?),
+                Key::Reference => take!(reference, "reference", map.next_value()?),
                 Key::Pipeline => take!(
                     pipeline,
                     "pipeline",
@@ -134,6 +144,7 @@ impl<'de> Visitor<'de> for ScenarioSeed<'_> {
         }
         let required = |field: &'static str| move || de::Error::missing_field(field);
         Ok(ScenarioSpec {
+            dimensions: dimensions.unwrap_or(2),
             name: name.ok_or_else(required("name"))?,
             end_time: end_time.ok_or_else(required("end_time"))?,
             fluid: fluid.unwrap_or_default(),
@@ -142,11 +153,13 @@ impl<'de> Visitor<'de> for ScenarioSeed<'_> {
             h_over_dx: h_over_dx.unwrap_or_else(default_h_over_dx),
             tank: tank.unwrap_or_default(),
             walls: walls.unwrap_or_default(),
+            boxes: boxes.unwrap_or_default(),
             piston: piston.unwrap_or_default(),
             fluid_blocks: fluid_blocks.ok_or_else(required("fluid_blocks"))?,
             pressure_sensors: pressure_sensors.unwrap_or_default(),
             wave_gauges: wave_gauges.unwrap_or_default(),
             sweep: sweep.unwrap_or_default(),
+            reference: reference.unwrap_or_default(),
             pipeline: pipeline.ok_or_else(required("pipeline"))?,
         })
     }

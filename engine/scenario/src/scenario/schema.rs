@@ -35,8 +35,8 @@ pub struct FluidSpec {
     /// Numerical speed of sound c_0 [m/s]. Default: derived as 10 sqrt(2 g H), H the
     /// tallest fluid block.
     pub sound_speed: Option<Positive>,
-    /// Gravity [m/s^2]. Default (0, -9.81).
-    pub gravity: (f64, f64),
+    /// Gravity [m/s^2]. Default (0, -9.81); in 3D (0, -9.81, 0).
+    pub gravity: Coords,
 }
 
 impl Default for FluidSpec {
@@ -45,7 +45,7 @@ impl Default for FluidSpec {
             density: Positive(1000.0),
             gamma: Positive(7.0),
             sound_speed: None,
-            gravity: (0.0, -9.81),
+            gravity: dim::xy(0.0, -9.81).into(),
         }
     }
 }
@@ -106,7 +106,8 @@ pub(crate) fn particles_across<'de, D: Deserializer<'de>>(d: D) -> Result<u32, D
 }
 
 /// An axis-aligned tank with its bottom-left inner corner at the origin; generates the
-/// walls `left`, `bottom`, `right` and, unless `open_top`, `top`. The scenario's
+/// walls `left`, `bottom`, `right` (3D: then `back` at z = 0 and `front` at z =
+/// breadth) and, unless `open_top`, `top`. The scenario's
 /// geometry (walls, blocks, sensors, gauges) is written in the tank frame; with a
 /// `motion` all of it rides with the tank.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -116,6 +117,9 @@ pub struct TankSpec {
     pub width: Positive,
     /// Inner height [m].
     pub height: Positive,
+    /// Inner breadth along z [m] (3D only).
+    #[cfg(feature = "dim3")]
+    pub breadth: Positive,
     /// No roof. Default true.
     #[serde(default = "yes")]
     pub open_top: bool,
@@ -125,12 +129,15 @@ pub struct TankSpec {
 }
 
 impl TankSpec {
-    /// The roll axis: the motion's pivot, or the centre of the bottom.
-    pub fn pivot(&self) -> DVec2 {
-        self.motion
+    /// The roll axis: the motion's pivot, or the centre of the bottom (in 3D the
+    /// axis is the line through it along z).
+    pub fn pivot(&self) -> Vector {
+        let (x, y) = self
+            .motion
             .as_ref()
             .and_then(|m| m.pivot)
-            .map_or(DVec2::new(0.5 * self.width.0, 0.0), DVec2::from)
+            .unwrap_or((0.5 * self.width.0, 0.0));
+        dim::xy(x, y)
     }
 }
 
@@ -167,23 +174,58 @@ pub(crate) fn yes() -> bool {
 }
 
 /// An extra straight wall; the fluid lies on the left of the direction `from` -> `to`.
+/// In 3D a rectangle with corners `from`, `to` and `across` (its edges run from `from`
+/// to each of the other two), the fluid on the side of (across - from) x (to - from):
+/// the left of `from` -> `to` seen from +z when `across` lies towards +z.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct WallSpec {
     pub name: String,
-    pub from: (f64, f64),
-    pub to: (f64, f64),
+    pub from: Coords,
+    pub to: Coords,
+    /// The rectangle's third corner (3D only).
+    #[cfg(feature = "dim3")]
+    pub across: Coords,
 }
 
-/// A rectangle of fluid at rest, filled on a square lattice of spacing ds with
-/// hydrostatic density (docs/analytic.md section 1).
+/// Width, height (and in 3D breadth) of a block or box [m], each > 0.
+#[cfg(not(feature = "dim3"))]
+pub type Extent = (Positive, Positive);
+/// Width, height (and in 3D breadth) of a block or box [m], each > 0.
+#[cfg(feature = "dim3")]
+pub type Extent = (Positive, Positive, Positive);
+
+/// `size` as a vector.
+pub(crate) fn extent(size: &Extent) -> Vector {
+    #[cfg(not(feature = "dim3"))]
+    return Vector::new(size.0 .0, size.1 .0);
+    #[cfg(feature = "dim3")]
+    return Vector::new(size.0 .0, size.1 .0, size.2 .0);
+}
+
+/// A rectangle (3D: a cuboid) of fluid at rest, filled on a square lattice of spacing
+/// ds with hydrostatic density (docs/analytic.md section 1).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BlockSpec {
-    /// Bottom-left corner [m].
-    pub min: (f64, f64),
-    /// Width and height [m].
-    pub size: (Positive, Positive),
+    /// The corner of least coordinates [m].
+    pub min: Coords,
+    /// Width and height (3D: and breadth) [m].
+    pub size: Extent,
+}
+
+/// A fixed solid box the fluid flows around (an obstacle): its faces are walls facing
+/// out, named `<name>_left` (x = min), `_right`, `_bottom` (y = min), `_top` and in 3D
+/// `_back` (z = min) and `_front`. A face lying on the tank's wall (a box standing on
+/// the floor) is left out: no fluid reaches it.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BoxSpec {
+    pub name: String,
+    /// The corner of least coordinates [m].
+    pub min: Coords,
+    /// Width and height (3D: and breadth) [m].
+    pub size: Extent,
 }
 
 /// A wall pressure sensor.
@@ -194,7 +236,7 @@ pub struct SensorSpec {
     /// Name of the wall it sits on.
     pub wall: String,
     /// Sensor centre [m]; must lie on the wall.
-    pub at: (f64, f64),
+    pub at: Coords,
     /// Width along the wall [m] used by Method III. Default: 2 h.
     #[serde(default)]
     pub width: Option<Positive>,
@@ -214,6 +256,46 @@ pub struct SensorSpec {
 pub struct GaugeSpec {
     pub name: String,
     pub x: f64,
+    /// The line's z [m] (3D only).
+    #[cfg(feature = "dim3")]
+    pub z: f64,
+}
+
+/// Measured (or converged) series the run is compared with when it ends: `reference.md`
+/// with each compared column's error, and `reference_<probe>.png` with both curves,
+/// beside `probes.csv` (docs/validation.md).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReferenceSpec {
+    /// The CSV file, relative to the scenario file: time [s] in the first column, a
+    /// header line naming the columns, `#` lines (its source notes) skipped.
+    pub file: String,
+    /// The times compared, t0 <= t <= t1 [s].
+    pub window: (f64, f64),
+    /// The columns compared.
+    pub compare: Vec<CompareSpec>,
+}
+
+/// One `probes.csv` column against one column of the reference file.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CompareSpec {
+    /// The `probes.csv` column, e.g. `H2` or `P1.shepard.transducer`.
+    pub probe: String,
+    /// The reference file's column.
+    pub data: String,
+    /// An impact's arrival level, in the column's unit: the arrival is the first time
+    /// each series reaches it, and the first-impact peak the largest value within
+    /// `peak_within` of that. Default: none (the mean error only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub arrival: Option<f64>,
+    /// Seconds after the arrival the first-impact peak is sought in. Default 0.1.
+    #[serde(default = "tenth")]
+    pub peak_within: Positive,
+}
+
+pub(crate) fn tenth() -> Positive {
+    Positive(0.1)
 }
 
 /// The scenario file's fields (docs/scenario.md documents each).
@@ -221,6 +303,10 @@ pub struct GaugeSpec {
 #[derive(Debug, Serialize)]
 #[serde(rename = "Scenario")]
 pub struct ScenarioSpec {
+    /// The space dimensions the scene is written for: 2 (default) or 3. The `engine`
+    /// command runs the build of that dimension; a build refuses the other's scenes.
+    #[serde(skip_serializing_if = "is_two")]
+    pub dimensions: u32,
     pub name: String,
     /// Simulated end time [s].
     pub end_time: Positive,
@@ -237,6 +323,9 @@ pub struct ScenarioSpec {
     pub tank: Option<TankSpec>,
     #[serde(default)]
     pub walls: Vec<WallSpec>,
+    /// Fixed solid boxes (obstacles).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub boxes: Vec<BoxSpec>,
     /// A piston wave maker (a moving vertical wall named `piston`).
     #[serde(default)]
     pub piston: Option<PistonSpec>,
@@ -248,9 +337,16 @@ pub struct ScenarioSpec {
     /// A frequency sweep, run by the `engine` command instead of a single run.
     #[serde(default)]
     pub sweep: Option<SweepSpec>,
+    /// Reference data the run is compared with when it ends. Default: none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference: Option<ReferenceSpec>,
     /// The ordered stages; see [`PipelineEntry`].
     #[serde(skip)]
     pub pipeline: Vec<PipelineEntry>,
+}
+
+pub(crate) fn is_two(n: &u32) -> bool {
+    *n == 2
 }
 
 pub(crate) fn default_kernel() -> KernelKind {

@@ -12,7 +12,11 @@ pub(crate) fn validate(
     let first = spec.fluid_blocks.first().ok_or_else(|| {
         at.field(
             "fluid_blocks",
-            "no fluid: give at least one block `(min: (x, y), size: (w, h))`".into(),
+            if dim::DIM == 2 {
+                "no fluid: give at least one block `(min: (x, y), size: (w, h))`".into()
+            } else {
+                "no fluid: give at least one block `(min: (x, y, z), size: (w, h, b))`".into()
+            },
         )
     })?;
     let spacing = match spec.resolution {
@@ -28,7 +32,13 @@ pub(crate) fn validate(
     let count: f64 = spec
         .fluid_blocks
         .iter()
-        .map(|b| (b.size.0 .0 / spacing + 1e-9).floor() * (b.size.1 .0 / spacing + 1e-9).floor())
+        .map(|b| {
+            extent(&b.size)
+                .to_array()
+                .iter()
+                .map(|l| (l / spacing + 1e-9).floor())
+                .product::<f64>()
+        })
         .sum();
     if count > MAX_PARTICLES {
         return Err(at.field(
@@ -42,7 +52,7 @@ pub(crate) fn validate(
             format!("spacing {spacing} m leaves the fluid blocks empty; use a finer resolution"),
         ));
     }
-    let gravity = DVec2::from(spec.fluid.gravity);
+    let gravity = Vector::from(spec.fluid.gravity);
     // Where the errors that gravity causes point.
     let gravity_place = at
         .doc
@@ -53,8 +63,14 @@ pub(crate) fn validate(
             "gravity",
             gravity_place,
             format!(
-                "({}, {}) is out of range; accepted: two finite numbers [m/s^2], e.g. (0.0, -9.81)",
-                gravity.x, gravity.y
+                "{} is out of range; accepted: {} finite numbers [m/s^2], e.g. {}",
+                written(gravity),
+                DIM_WORD,
+                if dim::DIM == 2 {
+                    "(0.0, -9.81)"
+                } else {
+                    "(0.0, -9.81, 0.0)"
+                }
             ),
         ));
     }
@@ -142,15 +158,20 @@ pub(crate) fn validate(
         source,
     };
     let walls = scenario.walls();
-    // The tank's walls come first, then the `walls` list's elements, then the piston.
+    // The tank's walls come first, then the `walls` list's elements, the boxes' faces,
+    // then the piston.
     let piston_walls = scenario.spec.piston.is_some() as usize;
-    let tank_walls = walls.len() - scenario.spec.walls.len() - piston_walls;
+    let box_walls: usize = (scenario.spec.boxes.iter())
+        .map(|b| box_faces(b, scenario.spec.tank.as_ref()).len())
+        .sum();
+    let tank_walls = walls.len() - scenario.spec.walls.len() - box_walls - piston_walls;
     let wall_place = |i: usize, key: &str| {
         if i + piston_walls >= walls.len() && piston_walls > 0 {
             return at.doc.key(&["piston"]);
         }
         match i.checked_sub(tank_walls) {
-            Some(k) => at.element("walls", k, key),
+            Some(k) if k < scenario.spec.walls.len() => at.element("walls", k, key),
+            Some(_) => at.doc.key(&["boxes"]),
             None => at.doc.key(&["walls"]),
         }
     };
@@ -170,39 +191,74 @@ pub(crate) fn validate(
             ));
         }
     }
-    for (i, b) in scenario.spec.fluid_blocks.iter().enumerate() {
-        if !(b.min.0.is_finite() && b.min.1.is_finite()) {
+    let blocks =
+        (scenario.spec.fluid_blocks.iter().enumerate()).map(|(i, b)| ("fluid_blocks", i, b.min));
+    let boxes = (scenario.spec.boxes.iter().enumerate()).map(|(i, b)| ("boxes", i, b.min));
+    for (list, i, min) in blocks.chain(boxes) {
+        if !Vector::from(min).is_finite() {
             return Err(at.error(
                 "min",
-                at.element("fluid_blocks", i, "min"),
+                at.element(list, i, "min"),
                 format!(
-                    "({}, {}) is out of range; accepted: two finite coordinates [m]",
-                    b.min.0, b.min.1
+                    "{} is out of range; accepted: {DIM_WORD} finite coordinates [m]",
+                    written(Vector::from(min))
                 ),
             ));
         }
     }
-    // Every particle must start on the fluid side of every wall it lies alongside.
+    let lines: Vec<_> = walls
+        .iter()
+        .map(|w| sph_core::walls::WallLine::of(&w.at_rest()))
+        .collect();
+    let solids: Vec<(&str, Vector, Vector)> = (scenario.spec.boxes.iter())
+        .map(|b| {
+            (
+                b.name.as_str(),
+                Vector::from(b.min),
+                Vector::from(b.min) + extent(&b.size),
+            )
+        })
+        .collect();
     for (x, _, _) in scenario.initial_particles() {
-        for w in &walls {
-            let s = w.abscissa(x);
-            if w.distance(x) < 0.0 && s >= 0.0 && s <= w.length() {
+        if let Some((name, _, _)) = solids
+            .iter()
+            .find(|(_, lo, hi)| x.cmpgt(*lo).all() && x.cmplt(*hi).all())
+        {
+            return Err(at.field(
+                "fluid_blocks",
+                format!("particle at {} m starts inside box `{name}`; blocks must lie outside the boxes", at4(x)),
+            ));
+        }
+        // Walls bound the fluid on one side: behind at any depth is outside (a box's
+        // faces are the box, checked above).
+        let faces = tank_walls + scenario.spec.walls.len()..walls.len() - piston_walls;
+        for (_, (w, line)) in
+            (walls.iter().zip(&lines).enumerate()).filter(|(i, _)| !faces.contains(i))
+        {
+            if line.behind(x, f64::INFINITY) {
                 return Err(at.field(
                     "fluid_blocks",
                     format!(
-                        "particle at ({:.4}, {:.4}) m starts outside wall `{}`; blocks must lie inside the walls",
-                        x.x, x.y, w.name
+                        "particle at {} m starts outside wall `{}`; blocks must lie inside the walls",
+                        at4(x),
+                        w.name
                     ),
                 ));
             }
         }
         if let Some(t) = &scenario.spec.tank {
-            if x.x < 0.0 || x.x > t.width.0 || x.y < 0.0 || x.y > t.height.0 {
+            let outside = x.x < 0.0 || x.x > t.width.0 || x.y < 0.0 || x.y > t.height.0;
+            #[cfg(feature = "dim3")]
+            let outside = outside || x.z < 0.0 || x.z > t.breadth.0;
+            if outside {
                 return Err(at.field(
                     "fluid_blocks",
                     format!(
-                        "particle at ({:.4}, {:.4}) m lies outside the tank (0..{} m by 0..{} m)",
-                        x.x, x.y, t.width.0, t.height.0
+                        "particle at {} m lies outside the tank (0..{} m by 0..{} m{})",
+                        at4(x),
+                        t.width.0,
+                        t.height.0,
+                        if dim::DIM == 3 { " by its breadth" } else { "" }
                     ),
                 ));
             }
@@ -222,29 +278,40 @@ pub(crate) fn validate(
                 ),
             ));
         };
-        let p = DVec2::from(s.at);
+        let p = Vector::from(s.at);
         // Written so that a NaN coordinate fails it.
         let on_wall =
             w.distance(p).abs() <= 1e-6 && w.abscissa(p) >= 0.0 && w.abscissa(p) <= w.length();
+        #[cfg(feature = "dim3")]
+        let on_wall = on_wall && {
+            let (rest, t) = (w.at_rest(), w.at_rest().abscissa_across(p));
+            t >= 0.0 && t <= rest.breadth()
+        };
         if !on_wall {
             return Err(at.error(
                 "pressure_sensors",
                 at.element("pressure_sensors", i, "at"),
                 format!(
-                    "sensor `{}` at ({}, {}) is not on wall `{}`; put `at` on the wall",
-                    s.name, p.x, p.y, w.name
+                    "sensor `{}` at {} is not on wall `{}`; put `at` on the wall",
+                    s.name,
+                    written(p),
+                    w.name
                 ),
             ));
         }
     }
     for (i, g) in scenario.spec.wave_gauges.iter().enumerate() {
-        if !g.x.is_finite() {
+        #[cfg(not(feature = "dim3"))]
+        let coordinates = [("x", g.x)];
+        #[cfg(feature = "dim3")]
+        let coordinates = [("x", g.x), ("z", g.z)];
+        if let Some((key, v)) = coordinates.into_iter().find(|(_, v)| !v.is_finite()) {
             return Err(at.error(
-                "x",
-                at.element("wave_gauges", i, "x"),
+                key,
+                at.element("wave_gauges", i, key),
                 format!(
-                    "gauge `{}` at x = {} is out of range; accepted: a finite abscissa [m]",
-                    g.name, g.x
+                    "gauge `{}` at {key} = {v} is out of range; accepted: a finite coordinate [m]",
+                    g.name
                 ),
             ));
         }
@@ -276,6 +343,32 @@ pub(crate) fn validate(
             ));
         }
     }
+    if let Some(r) = &scenario.spec.reference {
+        let place = |key: &str| {
+            at.doc
+                .key(&["reference", key])
+                .or_else(|| at.doc.key(&["reference"]))
+        };
+        let path = scenario.reference_file().unwrap_or_default();
+        if !path.is_file() {
+            return Err(at.error(
+                "file",
+                place("file"),
+                format!(
+                    "{} is not a file; accepted: a CSV file relative to the scenario",
+                    path.display()
+                ),
+            ));
+        }
+        let (t0, t1) = r.window;
+        if !(t0.is_finite() && t1.is_finite() && t0 < t1) {
+            return Err(at.error(
+                "window",
+                place("window"),
+                format!("({t0}, {t1}) is out of range; accepted: (t0, t1) with t0 < t1 [s]"),
+            ));
+        }
+    }
     if scenario.spec.pipeline.is_empty() {
         return Err(at.field(
             "pipeline",
@@ -302,6 +395,21 @@ pub(crate) fn validate(
         ));
     }
     Ok(scenario)
+}
+
+/// The number of a point's coordinates, in words.
+const DIM_WORD: &str = if dim::DIM == 2 { "two" } else { "three" };
+
+/// `v` as a scenario writes it: `(x, y)` or `(x, y, z)`.
+fn written(v: Vector) -> String {
+    let parts: Vec<String> = v.to_array().iter().map(f64::to_string).collect();
+    format!("({})", parts.join(", "))
+}
+
+/// `v` to four decimals, `(x, y)` or `(x, y, z)`.
+fn at4(v: Vector) -> String {
+    let parts: Vec<String> = v.to_array().iter().map(|c| format!("{c:.4}")).collect();
+    format!("({})", parts.join(", "))
 }
 
 /// Whether RON `text` holds a NaN or an infinity as a number (the tokens `NaN` and
@@ -414,6 +522,13 @@ pub(crate) fn piston(
             .key(&["piston", key])
             .or_else(|| at.doc.key(&["piston"]))
     };
+    if dim::DIM == 3 {
+        return Err(at.error(
+            "piston",
+            place("x"),
+            "the piston is not yet built in 3D; remove it, or run the scene in 2D".into(),
+        ));
+    }
     let Some(tank) = &spec.tank else {
         return Err(at.error(
             "piston",

@@ -82,7 +82,7 @@ pub(crate) fn scales(s: &Scenario) -> (f64, f64, f64) {
         .fold(0.0, f64::max);
     (
         s.spec.fluid.density.0,
-        DVec2::from(s.spec.fluid.gravity).length(),
+        sph_core::dim::Vector::from(s.spec.fluid.gravity).length(),
         top,
     )
 }

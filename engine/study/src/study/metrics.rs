@@ -45,6 +45,37 @@ pub fn rms_relative(sim: &[(f64, f64)], reference: &[(f64, f64)], from: f64, to:
     rms(compared(sim, reference, from, to).map(|(s, r)| s / r - 1.0))
 }
 
+/// Normalised mean absolute error mean_k |s(t_k) - r_k| / max_k |r_k| over the
+/// reference samples in [from, to] (as [`rms_difference`]): the error as a fraction of
+/// the measured range from zero (a water height, a pressure); NaN if none.
+pub fn nmae(sim: &[(f64, f64)], reference: &[(f64, f64)], from: f64, to: f64) -> f64 {
+    let (n, sum, scale) = compared(sim, reference, from, to)
+        .fold((0usize, 0.0, 0.0_f64), |(n, sum, scale), (s, r)| {
+            (n + 1, sum + (s - r).abs(), scale.max(r.abs()))
+        });
+    if n == 0 || scale == 0.0 {
+        f64::NAN
+    } else {
+        sum / n as f64 / scale
+    }
+}
+
+/// The first time at or after `from` that `series` reaches `level` from below, linearly
+/// interpolated between the samples around the crossing; None if it never does.
+pub fn arrival(series: &[(f64, f64)], level: f64, from: f64) -> Option<f64> {
+    let mut before: Option<(f64, f64)> = None;
+    for &(t, y) in series.iter().filter(|p| p.0 >= from) {
+        if y >= level {
+            return Some(match before {
+                Some((t0, y0)) if y0 < level => t0 + (t - t0) * (level - y0) / (y - y0),
+                _ => t,
+            });
+        }
+        before = Some((t, y));
+    }
+    None
+}
+
 fn rms(values: impl Iterator<Item = f64>) -> f64 {
     let (n, sum) = values.fold((0usize, 0.0), |(n, s), v| (n + 1, s + v * v));
     if n == 0 {
@@ -341,6 +372,30 @@ mod tests {
         let short = sampled(|t| t + 1.0, 3.0, 30);
         assert!((rms_difference(&short, &reference, 0.0, 10.0) - 1.0).abs() < 1e-12);
         assert!(rms_difference(&short, &reference, 5.0, 10.0).is_nan());
+    }
+
+    #[test]
+    fn nmae_is_the_mean_error_over_the_largest_reference_value() {
+        let reference = [(0.0, 0.0), (1.0, 2.0), (2.0, -4.0), (3.0, 1.0)];
+        // Off by 1 everywhere: mean error 1 over |-4|.
+        let sim: Vec<(f64, f64)> = reference.iter().map(|&(t, y)| (t, y + 1.0)).collect();
+        assert!((nmae(&sim, &reference, 0.0, 3.0) - 0.25).abs() < 1e-12);
+        // The window and the simulated span both bound it: only t = 1, 2 count.
+        let short = &sim[..3];
+        assert!((nmae(short, &reference, 1.0, 3.0) - 0.25).abs() < 1e-12);
+        let half = [(0.0, 0.0), (1.0, 2.0), (2.0, -3.0)];
+        assert!((nmae(&half, &reference, 1.0, 2.0) - 1.0 / 8.0).abs() < 1e-12);
+        assert!(nmae(&sim, &reference, 5.0, 6.0).is_nan());
+    }
+
+    #[test]
+    fn arrival_is_the_interpolated_first_crossing_after_from() {
+        let s = [(0.0, 0.0), (1.0, 1.0), (2.0, 3.0), (3.0, 0.0), (4.0, 5.0)];
+        assert_eq!(arrival(&s, 2.0, 0.0), Some(1.5));
+        assert_eq!(arrival(&s, 1.0, 0.0), Some(1.0));
+        assert_eq!(arrival(&s, 2.0, 2.5), Some(3.0 + 2.0 / 5.0));
+        assert_eq!(arrival(&s, 0.0, 0.0), Some(0.0));
+        assert_eq!(arrival(&s, 9.0, 0.0), None);
     }
 
     #[test]

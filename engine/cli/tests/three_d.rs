@@ -1,0 +1,291 @@
+//! The 3D engine through the `engine` command, as a user runs it: a scenario with
+//! `dimensions: 3` runs the 3D build (docs/architecture.md, "Two and three
+//! dimensions"). Still water against hydrostatics, results for any thread count and
+//! on resume, and SPHERIC Test 2 against its measurements (docs/validation.md, "3D").
+
+use sph_study::series::read_series;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const ENGINE: &str = env!("CARGO_BIN_EXE_engine");
+
+fn scenario(name: &str) -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../scenarios")
+        .join(name)
+        .display()
+        .to_string()
+}
+
+fn temp(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("engine-3d-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+fn engine(args: &[&str]) -> Output {
+    Command::new(ENGINE)
+        .args(args)
+        .output()
+        .expect("the engine binary runs")
+}
+
+/// `engine args`, which must succeed.
+fn run(args: &[&str]) -> String {
+    let o = engine(args);
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(o.status.success(), "engine {args:?} failed:\n{text}");
+    text
+}
+
+/// Outputs off that the checks do not read.
+const QUIET: [&str; 6] = [
+    "--set",
+    "pipeline.vtk_frames.interval=10.0",
+    "--set",
+    "pipeline.probe.plots=false",
+    "--set",
+    "pipeline.energy.plots=false",
+];
+
+/// Still water in the 3D box tank (scenarios/3d/hydrostatic.ron at H/ds = 10, 1,500
+/// particles) for the full 3 s: the pressure below the surface layer within 1 % of
+/// rho_0 g (H - y) at every sample of the last 0.1 s (the issue's bound; measured
+/// +0.20 % on the floor and +0.45 % at mid-depth), and the largest speed decaying
+/// (1.5 mm/s at 0.5 s, 0.4 mm/s at 3 s: below a third of it over the last half
+/// second).
+#[test]
+fn still_water_in_3d_holds_hydrostatic_pressure_for_three_seconds() {
+    let out = temp("still");
+    let o = out.display().to_string();
+    let mut args = vec![
+        scenario("3d/hydrostatic.ron"),
+        "--out".into(),
+        o.clone(),
+        "-q".into(),
+        "--set".into(),
+        "resolution=Spacing(0.02)".into(),
+    ];
+    args.extend(QUIET.iter().map(|s| s.to_string()));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    run(&args);
+    let probes = out.join("probes.csv");
+    let (rho, g, depth) = (1000.0, 9.81, 0.2);
+    for (column, y) in [("bottom.shepard", 0.0), ("side.shepard", 0.1)] {
+        let p = read_series(&probes, column).unwrap();
+        let expected = rho * g * (depth - y);
+        let late: Vec<f64> = p.iter().filter(|s| s.0 >= 2.9).map(|s| s.1).collect();
+        assert!(
+            late.len() >= 10,
+            "{column}: {} samples after 2.9 s",
+            late.len()
+        );
+        for v in late {
+            assert!(
+                (v / expected - 1.0).abs() < 0.01,
+                "{column}: {v:.1} Pa against rho g (H - y) = {expected:.1} Pa"
+            );
+        }
+    }
+    let speed = read_series(&probes, "max_speed").unwrap();
+    let largest = |from: f64, to: f64| {
+        speed
+            .iter()
+            .filter(|s| s.0 >= from && s.0 <= to)
+            .map(|s| s.1)
+            .fold(0.0, f64::max)
+    };
+    let (early, late) = (largest(0.4, 0.6), largest(2.5, 3.0));
+    assert!(
+        early > 0.0 && late < early / 3.0,
+        "speeds do not decay: {early} m/s early, {late} m/s late"
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+/// The coarse SPHERIC Test 2 to `end` (ds = 0.05 m, 5,280 particles) into `out`, with
+/// extra arguments.
+fn coarse_test2(out: &Path, end: &str, extra: &[&str]) -> String {
+    let o = out.display().to_string();
+    let end = format!("end_time={end}");
+    let scene = scenario("3d/dam_break_obstacle.ron");
+    let mut args = vec![
+        scene.as_str(),
+        "--out",
+        &o,
+        "-q",
+        "--set",
+        "resolution=Spacing(0.05)",
+        "--set",
+        &end,
+        "--set",
+        "pipeline.vtk_frames.interval=0.05",
+    ];
+    args.extend(QUIET[2..].iter());
+    args.extend(extra);
+    run(&args)
+}
+
+/// 3D results are bit-identical on one thread and on two, and a run stopped with a
+/// checkpoint and resumed writes what the uninterrupted run writes (probes, energy,
+/// the last ParaView frame).
+#[test]
+fn three_d_results_do_not_depend_on_threads_or_on_resuming() {
+    let (one, two, part) = (temp("one"), temp("two"), temp("part"));
+    coarse_test2(&one, "0.12", &["--threads", "1"]);
+    coarse_test2(&two, "0.12", &["--threads", "2"]);
+    coarse_test2(&part, "0.12", &["--threads", "2", "--stop-at", "0.05"]);
+    let p = part.display().to_string();
+    run(&["resume", &p, "--threads", "1", "-q"]);
+    for file in ["probes.csv", "energy.csv", "frames/frame_00002.vtp"] {
+        let a = std::fs::read(one.join(file)).unwrap();
+        assert!(a.len() > 1000, "{file} is nearly empty");
+        assert!(
+            a == std::fs::read(two.join(file)).unwrap(),
+            "{file}: 1 and 2 threads differ"
+        );
+        assert!(
+            a == std::fs::read(part.join(file)).unwrap(),
+            "{file}: the resumed run differs"
+        );
+    }
+    for dir in [one, two, part] {
+        let _ = std::fs::remove_dir_all(dir);
+    }
+}
+
+/// A scene of the other dimension is refused by name: `dimensions: 3` on a 2D file
+/// reaches the 3D build, which says which field does not fit it.
+#[test]
+fn a_scene_of_the_other_dimension_is_refused_with_the_field() {
+    let o = engine(&[
+        &scenario("dam_break.ron"),
+        "--set",
+        "dimensions=3",
+        "--out",
+        &temp("other").display().to_string(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("dam_break.ron:") && err.contains("field `"),
+        "{err}"
+    );
+    let o = engine(&[
+        &scenario("3d/hydrostatic.ron"),
+        "--set",
+        "dimensions=4",
+        "--out",
+        &temp("four").display().to_string(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("field `dimensions`") && err.contains("accepted: 2 or 3"),
+        "{err}"
+    );
+}
+
+/// SPHERIC Test 2 at the coarse resolution CI affords (ds = 0.05 m, 5,280 particles,
+/// 2 s) against the measured record, through the run's own comparison
+/// (`reference.md`, the scenario's `reference`): the water heights H2 (in front of the
+/// box) and H4 (in the reservoir) within the issue's 10 % normalised mean absolute
+/// error over 0-2 s (measured 4.2 % and 1.4 %), and P1's arrival (its first 1 kPa)
+/// within the issue's 10 % (measured +1.8 %). P1's first peak is not held here: at
+/// this resolution the box is three particles wide and the impact's acoustic noise
+/// puts the 1 ms mean several times above the measured peak (docs/validation.md, "3D",
+/// has the peak per resolution).
+#[test]
+fn spheric_test2_coarse_heights_and_arrival_match_the_measurements() {
+    let out = temp("test2");
+    let text = coarse_test2(&out, "2.0", &[]);
+    assert!(text.contains("(reference.md)"), "{text}");
+    let md = std::fs::read_to_string(out.join("reference.md")).unwrap();
+    // The table's rows: | probe | reference | NMAE | arrival | error | peak | error |
+    let row = |probe: &str| -> Vec<String> {
+        md.lines()
+            .find(|l| l.starts_with(&format!("| {probe} |")))
+            .unwrap_or_else(|| panic!("no row for {probe} in\n{md}"))
+            .split('|')
+            .map(|c| c.trim().to_string())
+            .collect()
+    };
+    let percent = |cell: &str| -> f64 {
+        cell.trim_end_matches('%')
+            .trim()
+            .parse()
+            .unwrap_or(f64::NAN)
+    };
+    for probe in ["H2", "H4"] {
+        let nmae = percent(&row(probe)[3]);
+        assert!(nmae <= 10.0, "{probe}: NMAE {nmae} % over 0-2 s\n{md}");
+    }
+    let arrival = percent(&row("P1.shepard.transducer")[5]);
+    assert!(arrival.abs() <= 10.0, "P1 arrives {arrival} % off\n{md}");
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+/// Every 3D scenario, coarse and short (moving tanks with a 0.1 s ramp, so that they
+/// move): probes and energy byte-identical on 1 thread and on 2. A file added to
+/// scenarios/3d/ without an entry here fails.
+#[test]
+fn every_3d_scenario_gives_the_same_results_on_one_and_two_threads() {
+    let cases: &[(&str, &[&str])] = &[
+        (
+            "dam_break_obstacle.ron",
+            &["resolution=Spacing(0.06)", "end_time=0.1"],
+        ),
+        (
+            "hydrostatic.ron",
+            &["resolution=Spacing(0.025)", "end_time=0.1"],
+        ),
+        (
+            "sloshing.ron",
+            &[
+                "resolution=ParticlesAcross(45)",
+                "end_time=0.3",
+                "tank.motion.ramp=0.1",
+                "tank.motion.roll.period=0.4",
+            ],
+        ),
+        (
+            "dam_break_dualsphysics.ron",
+            &["resolution=Spacing(0.03)", "end_time=0.05"],
+        ),
+    ];
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/3d");
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let name = entry.unwrap().file_name().to_string_lossy().into_owned();
+        assert!(
+            !name.ends_with(".ron") || cases.iter().any(|c| c.0 == name),
+            "scenarios/3d/{name} has no entry in this test"
+        );
+    }
+    for (file, sets) in cases {
+        let outs = [temp(&format!("t1-{file}")), temp(&format!("t2-{file}"))];
+        for (out, threads) in outs.iter().zip(["1", "2"]) {
+            let scene = scenario(&format!("3d/{file}"));
+            let o = out.display().to_string();
+            let mut args = vec![scene.as_str(), "--out", &o, "-q", "--threads", threads];
+            for s in sets.iter() {
+                args.extend(["--set", s]);
+            }
+            args.extend(QUIET.iter());
+            run(&args);
+        }
+        for f in ["probes.csv", "energy.csv"] {
+            let a = std::fs::read(outs[0].join(f)).unwrap();
+            assert!(a.len() > 200, "{file}: {f} is nearly empty");
+            assert!(
+                a == std::fs::read(outs[1].join(f)).unwrap(),
+                "{file}: {f} differs between 1 and 2 threads"
+            );
+        }
+        for out in outs {
+            let _ = std::fs::remove_dir_all(out);
+        }
+    }
+}
