@@ -31,18 +31,14 @@ pub use equations::{continuity, damping_zone, eos, forces, reinitialise};
 pub use equations::{density_gradient, shifting};
 
 pub mod solvers;
-#[cfg(not(feature = "dim3"))]
 pub(crate) use solvers::pressure_solve;
-#[cfg(not(feature = "dim3"))]
 pub use solvers::{density_solve, dfsph_factor, divergence_solve};
 
 pub mod integration;
 pub use integration::{advance, integrate};
 
 pub mod outputs;
-#[cfg(not(feature = "dim3"))]
-pub use outputs::snapshots;
-pub use outputs::{energy, probe, transducer, vtk_frames};
+pub use outputs::{energy, probe, snapshots, transducer, vtk_frames};
 
 use sph_core::StageRegistry;
 
@@ -60,16 +56,16 @@ pub fn register_standard(registry: &mut StageRegistry) {
     damping_zone::register(registry);
     energy::register(registry);
     vtk_frames::register(registry);
+    dfsph_factor::register(registry);
+    divergence_solve::register(registry);
+    density_solve::register(registry);
+    snapshots::register(registry);
     // Not yet built in 3D (docs/architecture.md, "Two and three dimensions").
     #[cfg(not(feature = "dim3"))]
     {
         wall_particles::register(registry);
         wall_pressure::register(registry);
-        dfsph_factor::register(registry);
-        divergence_solve::register(registry);
-        density_solve::register(registry);
         shifting::register(registry);
-        snapshots::register(registry);
     }
 }
 

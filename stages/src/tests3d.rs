@@ -245,8 +245,9 @@ fn the_momentum_and_continuity_sums_are_the_pair_sums_in_3d() {
 /// closed 0.2 x 0.2 x 0.1 m box, mirrored walls on all six faces (edges and vertices
 /// included), the still tank's scheme (`scenarios/hydrostatic.ron`: pressure
 /// gradient, Monaghan viscosity 0.03, continuity, Fourtakas' diffusion 0.1), stepped
-/// to t = `end`. Returns the sim and the largest speed seen in each tenth of the run.
-fn still_tank_3d(end: f64) -> (sph_core::sim::Sim, Vec<f64>) {
+/// to t = `end`, or by `pipeline` when given. Returns the sim and the largest speed
+/// seen in each tenth of the run.
+fn still_tank_3d(end: f64, pipeline: Option<&[(&str, &str)]>) -> (sph_core::sim::Sim, Vec<f64>) {
     use sph_core::sim::Sim;
     let mut world = hecs::World::new();
     closed_box_3d(&mut world, Vector::new(0.2, 0.2, 0.1));
@@ -276,19 +277,17 @@ fn still_tank_3d(end: f64) -> (sph_core::sim::Sim, Vec<f64>) {
     }
     let mut sim: Sim = crate::testing::sim(world);
     sim.clock.end_time = end;
-    let mut stages = crate::testing::pipeline(
-        &mut sim,
-        &[
-            ("ghost_walls", "(slip: FreeSlip, hydrostatic: true)"),
-            ("neighbour_grid", "()"),
-            ("eos", "()"),
-            (
-                "forces",
-                "(terms: [PressureGradient(), ArtificialViscosity(alpha: 0.03), Continuity(), Fourtakas(delta: 0.1)])",
-            ),
-            ("integrate", "(courant: 0.25)"),
-        ],
-    );
+    let wcsph: &[(&str, &str)] = &[
+        ("ghost_walls", "(slip: FreeSlip, hydrostatic: true)"),
+        ("neighbour_grid", "()"),
+        ("eos", "()"),
+        (
+            "forces",
+            "(terms: [PressureGradient(), ArtificialViscosity(alpha: 0.03), Continuity(), Fourtakas(delta: 0.1)])",
+        ),
+        ("integrate", "(courant: 0.25)"),
+    ];
+    let mut stages = crate::testing::pipeline(&mut sim, pipeline.unwrap_or(wcsph));
     let mut peaks = vec![0.0_f64; 10];
     while sim.clock.time < end {
         for stage in &mut stages {
@@ -316,33 +315,78 @@ fn still_tank_3d(end: f64) -> (sph_core::sim::Sim, Vec<f64>) {
 /// below 1 mm/s (0.1 % of sqrt(g H); measured 1.05 then 0.33 mm/s).
 #[test]
 fn still_water_in_a_box_stays_hydrostatic_in_3d() {
-    let (sim, peaks) = still_tank_3d(0.4);
-    let (rho0, g, h) = (1000.0, 9.81, 0.1);
+    let (sim, peaks) = still_tank_3d(0.4, None);
+    let (worst, mean) = hydrostatic_departure(&sim, 0.1);
+    println!(
+        "3D still tank at t = 0.4 s: largest departure {:.3} %, mean {:.3} % of rho_0 g H; speeds by tenth {peaks:?}",
+        100.0 * worst,
+        100.0 * mean
+    );
+    assert!(worst < 0.03, "{:.2} % of rho_0 g H", 100.0 * worst);
+    assert!(peaks[9] < 0.5 * peaks[0] && peaks[9] < 1e-3, "{peaks:?}");
+}
+
+/// The 3D still tank with the DFSPH pipeline (`scenarios/hydrostatic_dfsph.ron`:
+/// summation density and factor, divergence and density solves to 0.1 %, Monaghan
+/// viscosity 0.03 as the non-pressure force, steps by the CFL rule up to 5 ms) holds
+/// rho_0 g (H - y) and comes to rest: at t = 0.4 s, below the surface layer, every
+/// particle's pressure within 4 % of rho_0 g H of hydrostatic and their mean departure
+/// within 2 % (measured 3.18 % and 1.78 %: the solve, stopped at a mean compression
+/// of 0.1 %, leaves the rows of this H/ds = 10 tank alternately 0.0-1.0 % and 1.5-3.2 %
+/// high, where the 2D tank at H/ds = 100 holds its layers within 1 %), and the largest
+/// speed below 1 mm/s (measured 1e-10 m/s) in the last tenth of the run. What is
+/// 3D here: the particle mass from the cubic lattice's kernel sum (the square
+/// lattice's started the water 9 % compressed) and the Jacobi bound on that lattice,
+/// 0.476 at h/ds 1.3 against 0.77 in 2D (with the 2D solves' omega = 0.5 uncapped,
+/// the step collapsed within 0.1 s).
+#[test]
+fn still_water_stays_hydrostatic_with_dfsph_in_3d() {
+    let pipeline: &[(&str, &str)] = &[
+        ("ghost_walls", "(slip: FreeSlip, hydrostatic: true)"),
+        ("neighbour_grid", "(skin: 0.0)"),
+        ("dfsph_factor", "()"),
+        ("divergence_solve", "(tolerance: 0.001)"),
+        ("forces", "(terms: [ArtificialViscosity(alpha: 0.03)])"),
+        (
+            "density_solve",
+            "(tolerance: 0.001, courant: 0.4, max_dt: 0.005)",
+        ),
+        ("advance", "()"),
+    ];
+    let (sim, peaks) = still_tank_3d(0.4, Some(pipeline));
+    let (worst, mean) = hydrostatic_departure(&sim, 0.1);
+    println!(
+        "3D DFSPH still tank at t = 0.4 s: largest departure {:.3} %, mean {:.3} % of rho_0 g H; speeds by tenth {peaks:?}",
+        100.0 * worst,
+        100.0 * mean
+    );
+    assert!(
+        worst < 0.04 && mean < 0.02,
+        "{:.2} % of rho_0 g H",
+        100.0 * worst
+    );
+    assert!(peaks[9] < 1e-3, "{peaks:?}");
+}
+
+/// The largest and the mean |p - rho_0 g (H - y)| / (rho_0 g H) of the fluid below
+/// the surface layer (y < H - 2 ds, ds = 0.01 m) of a still tank of depth `h`.
+fn hydrostatic_departure(sim: &sph_core::sim::Sim, h: f64) -> (f64, f64) {
+    let (rho0, g) = (1000.0, 9.81);
     let fluid = archetype::<Fluid>(&sim.world).unwrap();
     let (x, p) = (
         column::<Position>(fluid).unwrap(),
         column::<Pressure>(fluid).unwrap(),
     );
-    let mut worst: f64 = 0.0;
-    let (mut sum, mut n, mut at) = (0.0, 0, Vector::ZERO);
+    let (mut worst, mut sum, mut n) = (0.0_f64, 0.0, 0);
     for (x, p) in x.iter().zip(p.iter()) {
         if x.0.y < h - 0.02 {
             let e = (p.0 - rho0 * g * (h - x.0.y)).abs() / (rho0 * g * h);
-            if e > worst {
-                at = x.0;
-            }
             worst = worst.max(e);
             sum += e;
             n += 1;
         }
     }
-    println!(
-        "mean departure {:.3} %, worst at {at}",
-        100.0 * sum / n as f64
-    );
-    println!("3D still tank at t = 0.4 s: largest departure {:.3} % of rho_0 g H; speeds by tenth {peaks:?}", 100.0 * worst);
-    assert!(worst < 0.03, "{:.2} % of rho_0 g H", 100.0 * worst);
-    assert!(peaks[9] < 0.5 * peaks[0] && peaks[9] < 1e-3, "{peaks:?}");
+    (worst, sum / n.max(1) as f64)
 }
 
 /// What is not yet built in 3D is refused at setup, by name, not run as 2D: walls

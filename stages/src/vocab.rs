@@ -13,7 +13,6 @@
 //!   follow their sources', and the ghosts' no-slip velocities for the viscous terms.
 //! - [`DfsphFactors`], [`StepSize`]: what the DFSPH stages pass each other.
 
-use glam::DVec2;
 use rayon::prelude::*;
 use sph_core::components::{Density, Fluid, Ghost, MirrorWall, Position, WallPose};
 use sph_core::dim::{Vector, DIM};
@@ -175,22 +174,28 @@ pub fn refresh_ghost_density(sim: &Sim) -> Result<(), StepError> {
     Ok(())
 }
 
-/// The linear part of each ghost's velocity mirror, fluid-to-ghost, one 2x2 matrix
-/// `[xx, xy, yx, yy]` per ghost in archetype order: a change dv of a source's velocity
+/// The linear part of each ghost's velocity mirror, fluid-to-ghost, one DIM x DIM
+/// matrix row by row (`[xx, xy, yx, yy]` in 2D) per ghost in archetype order: a change dv of a source's velocity
 /// changes its ghost's by L dv (I - 2 n n^T per wall crossed: a ghost's `Velocity`
 /// mirrors the normal component whatever the walls' slip, see [`NoSlipVelocity`]).
 /// Asked for by a stage that changes fluid velocities after the ghosts were placed
 /// (the DFSPH solves, which keep the ghosts' velocities mirrored during their
 /// iterations) by inserting it; filled in by `GhostWalls` every step.
 #[derive(Debug, Default, Clone)]
-pub struct GhostReflections(pub Vec<[f64; 4]>);
+pub struct GhostReflections(pub Vec<[f64; DIM * DIM]>);
 
 impl GhostReflections {
-    /// L v for ghost `k`.
+    /// L v for ghost `k` (L row by row).
     #[inline(always)]
-    pub fn apply(&self, k: usize, v: DVec2) -> DVec2 {
-        let l = self.0[k];
-        DVec2::new(l[0] * v.x + l[1] * v.y, l[2] * v.x + l[3] * v.y)
+    pub fn apply(&self, k: usize, v: Vector) -> Vector {
+        let l = &self.0[k];
+        let mut out = Vector::ZERO;
+        for r in 0..DIM {
+            let row = &l[r * DIM..(r + 1) * DIM];
+            // Summed from the first product (not from 0.0): the sign of a zero is kept.
+            out[r] = (1..DIM).fold(row[0] * v[0], |s, c| s + row[c] * v[c]);
+        }
+        out
     }
 }
 
@@ -282,7 +287,7 @@ pub struct DfsphFactors {
 #[derive(Debug, Default, Clone)]
 pub struct PairGradients {
     pub start: Vec<usize>,
-    pub grad: Vec<DVec2>,
+    pub grad: Vec<Vector>,
 }
 
 impl PairGradients {
@@ -291,7 +296,7 @@ impl PairGradients {
     /// # Panics
     /// If i is not below the fluid count the gradients were filled for.
     #[inline]
-    pub fn row(&self, i: usize) -> &[DVec2] {
+    pub fn row(&self, i: usize) -> &[Vector] {
         &self.grad[self.start[i]..self.start[i + 1]]
     }
 

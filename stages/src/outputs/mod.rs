@@ -3,8 +3,6 @@
 
 pub mod energy;
 pub mod probe;
-// Not yet built in 3D (docs/architecture.md, "Two and three dimensions").
-#[cfg(not(feature = "dim3"))]
 pub mod snapshots;
 pub mod transducer;
 pub mod vtk_frames;

@@ -18,7 +18,6 @@
 
 use crate::pressure_solve::{cap_relaxation, limits, Jacobi, Limits, Report, Target};
 use crate::vocab::{DfsphFactors, GhostReflections, NoSlipVelocity, StepSize};
-use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
@@ -26,6 +25,7 @@ use sph_core::components::{
     Acceleration, Density, Fluid, Ghost, Mass, Position, Pressure, Velocity,
 };
 use sph_core::contract::Access;
+use sph_core::dim::Vector;
 use sph_core::sim::{Clock, Sim};
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{require_neighbours, Neighbours};
@@ -236,7 +236,7 @@ impl Stage for DensitySolve {
                     .for_each(|(rho, rate)| rho.0 += dt * rate);
             }
         }
-        let acc: &[DVec2] = &self.jacobi.acc;
+        let acc: &[Vector] = &self.jacobi.acc;
         if let Some(fluid) = archetype::<Fluid>(&sim.world) {
             column_mut::<Acceleration>(fluid)?
                 .par_iter_mut()
@@ -333,10 +333,11 @@ fn unstable(what: &str, sim: &Sim, i: usize) -> StepError {
     }
 }
 
-#[cfg(test)]
+#[cfg(all(test, not(feature = "dim3")))]
 mod tests {
     use super::*;
     use crate::pressure_solve::limits;
+    use glam::DVec2;
     use sph_core::extremes::nan_max;
     use sph_core::kernel::Kernel;
 

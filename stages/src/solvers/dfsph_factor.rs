@@ -8,12 +8,13 @@
 //! of the wall's body at the source (as `vocab::ghost_density` carries it in
 //! WCSPH), else 0. Both go to `vocab::DfsphFactors` for the two solves.
 
+use crate::pressure_solve::lattice;
 use crate::vocab::{DfsphFactors, GhostSettings, PairGradients};
-use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure};
 use sph_core::contract::Access;
+use sph_core::dim::{cell_volume, Vector, DIM};
 use sph_core::kernel::Kernel;
 use sph_core::motion::Pose;
 use sph_core::sim::Sim;
@@ -72,10 +73,10 @@ impl Stage for DfsphFactor {
         "dfsph_factor"
     }
 
-    /// Sets every fluid particle's mass to rho_0 ds^2 / S, S the kernel's sum over a
-    /// square lattice of spacing ds (sum_k ds^2 W(|k| ds)), so that a particle inside
+    /// Sets every fluid particle's mass to rho_0 ds^DIM / S, S the kernel's sum over a
+    /// square (3D: cubic) lattice of spacing ds (sum_k ds^DIM W(|k| ds)), so that a particle inside
     /// the initial lattice sums to rho_0 exactly and the fluid starts at rest density.
-    /// The scenario's masses (rho(y) ds^2, the weakly-compressible hydrostatic profile)
+    /// The scenario's masses (rho(y) ds^DIM, the weakly-compressible hydrostatic profile)
     /// would start the column 0.2-0.8 % off rest density (the lattice sum of the
     /// Wendland kernel at h/ds = 1.3-1.5 is not 1, and the bottom particles carry the
     /// Tait compression), which the solve would then spend its first steps expanding.
@@ -92,14 +93,14 @@ impl Stage for DfsphFactor {
         let reach = (c.support() / ds).ceil() as i64;
         let sum = with_kernel!(c.kernel, c.h, |k| {
             let mut sum = 0.0;
-            for i in -reach..=reach {
-                for j in -reach..=reach {
-                    sum += ds * ds * k.w(ds * ((i * i + j * j) as f64).sqrt());
-                }
+            for n in lattice(-reach, reach) {
+                sum += cell_volume(ds) * k.w(ds * n.length_squared().sqrt());
             }
             sum
         });
-        let (m, rho0) = (c.eos.rho0 * ds * ds / sum, c.eos.rho0);
+        // rho_0 ds ds (ds) / S, multiplied in that order (the 2D masses as they were).
+        let m = (0..DIM).fold(c.eos.rho0, |m, _| m * ds) / sum;
+        let rho0 = c.eos.rho0;
         if let Some(fluid) = archetype::<Fluid>(&sim.world) {
             let (Ok(mut mass), Ok(mut rho)) =
                 (column_mut::<Mass>(fluid), column_mut::<Density>(fluid))
@@ -204,7 +205,7 @@ impl DfsphFactor {
             start.push(start[i] + nb.of(i).len());
         }
         gradients.grad.clear();
-        gradients.grad.resize(start[n], DVec2::ZERO);
+        gradients.grad.resize(start[n], Vector::ZERO);
         // Each particle's row of the flat buffer, to fill them in parallel.
         let mut rows = Vec::with_capacity(n);
         let mut rest = &mut gradients.grad[..];
@@ -226,7 +227,7 @@ impl DfsphFactor {
                 .enumerate()
                 .for_each(|(i, (row, out))| {
                     let xi = x.fluid[i].0;
-                    let (mut rho, mut sum, mut s2) = (m.fluid[i].0 * w0, DVec2::ZERO, 0.0);
+                    let (mut rho, mut sum, mut s2) = (m.fluid[i].0 * w0, Vector::ZERO, 0.0);
                     for (g, &j) in row.iter_mut().zip(nb.of(i)) {
                         let (xj, mj) = at(j as usize);
                         let d = xi - xj;
@@ -296,16 +297,17 @@ impl DfsphFactor {
                 let a_w = poses
                     .iter()
                     .find(|(e, _)| *e == walls[k].0)
-                    .map_or(glam::DVec2::ZERO, |p| p.1.acceleration_at(xs));
+                    .map_or(Vector::ZERO, |p| p.1.acceleration_at(xs));
                 *off = rho0 * (g - a_w).dot(gx[k].0 - xs);
             });
         Ok(())
     }
 }
 
-#[cfg(test)]
+#[cfg(all(test, not(feature = "dim3")))]
 mod tests {
     use super::*;
+    use glam::DVec2;
     use sph_core::components::Velocity;
     use sph_core::kernel::Wendland;
 

@@ -143,7 +143,7 @@ impl Stage for DivergenceSolve {
     }
 }
 
-#[cfg(test)]
+#[cfg(all(test, not(feature = "dim3")))]
 mod tests {
     use super::*;
     use glam::DVec2;

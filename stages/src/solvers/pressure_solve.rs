@@ -56,12 +56,11 @@
 //! neighbour list in list order, and the error is summed in fixed chunks
 //! (`world::sum_fixed`).
 
-use crate::vocab::{DfsphFactors, GhostReflections, NoSlipSigns, NoSlipVelocity, PairGradients};
-use glam::DVec2;
+use crate::vocab::{DfsphFactors, GhostReflections, NoSlipSigns, PairGradients};
 use rayon::prelude::*;
 use sph_core::components::{Density, Fluid, Ghost, Pressure, Velocity};
+use sph_core::dim::{self, Vector};
 use sph_core::kernel::Kernel;
-use sph_core::pair::Columns;
 use sph_core::sim::Resources;
 use sph_core::sim::Sim;
 use sph_core::stage::StepError;
@@ -106,14 +105,14 @@ pub(crate) struct Outcome {
 #[derive(Default)]
 pub(crate) struct Jacobi {
     /// Fluid and ghost velocities before the pressure acts.
-    base: Vec<DVec2>,
-    ghost_base: Vec<DVec2>,
+    base: Vec<Vector>,
+    ghost_base: Vec<Vector>,
     /// D rho/Dt of each fluid particle; after a solve, at its final velocities.
     pub rate: Vec<f64>,
     /// The pressure acceleration of each fluid particle.
-    pub acc: Vec<DVec2>,
+    pub acc: Vec<Vector>,
     /// Joint (fluid, then ghost) buffers: velocities, or p / rho^2.
-    joint_v: Vec<DVec2>,
+    joint_v: Vec<Vector>,
     joint_q: Vec<f64>,
 }
 
@@ -197,7 +196,7 @@ impl Jacobi {
         }
         self.rate.resize(n, 0.0);
         self.acc.clear();
-        self.acc.resize(n, DVec2::ZERO);
+        self.acc.resize(n, Vector::ZERO);
         let rho0 = sim.constants.eos.rho0;
         let inv_dt2 = 1.0 / (dt * dt);
         let omega = limits.relaxation;
@@ -273,10 +272,10 @@ impl Jacobi {
     /// The pressure acceleration of every fluid particle at the pressures the
     /// `Pressure` column holds now, the ghosts' set from their sources' first (as the
     /// density solve carries them): a step's start-up estimate, before a solve.
-    pub(crate) fn acceleration_now(&mut self, sim: &mut Sim) -> Result<&[DVec2], StepError> {
+    pub(crate) fn acceleration_now(&mut self, sim: &mut Sim) -> Result<&[Vector], StepError> {
         let factors = sim.resources.take::<DfsphFactors>().unwrap_or_default();
         self.acc.clear();
-        self.acc.resize(factors.alpha.len(), DVec2::ZERO);
+        self.acc.resize(factors.alpha.len(), Vector::ZERO);
         let done = sync_ghost_pressures(sim, &factors.ghost_offset)
             .and_then(|()| self.pressure_acceleration(sim, &factors.gradients));
         sim.resources.insert(factors);
@@ -366,7 +365,7 @@ fn over_pairs<X: Copy + Sync, O: Send + Default + std::ops::Add<Output = O>>(
     gradients: &PairGradients,
     joint: &[X],
     out: &mut [O],
-    pair: impl Fn(X, X, DVec2) -> O + Sync,
+    pair: impl Fn(X, X, Vector) -> O + Sync,
 ) {
     out.par_iter_mut().enumerate().for_each(|(i, o)| {
         let xi = joint[i];
@@ -405,11 +404,14 @@ fn residual(target: Target, dt: f64, rho0: f64, rho: f64, rate: f64) -> f64 {
 /// Changes every ghost's no-slip velocity (the [`NoSlipVelocity`] column, when the
 /// walls do not slip) by the mirror of its source's velocity change `dv(source)`; the
 /// ghosts are `world`'s.
+#[cfg(not(feature = "dim3"))]
 pub(crate) fn shift_no_slip(
     world: &hecs::World,
     resources: &mut Resources,
-    dv: impl Fn(usize) -> DVec2 + Sync,
+    dv: impl Fn(usize) -> Vector + Sync,
 ) -> Result<(), StepError> {
+    use crate::vocab::NoSlipVelocity;
+    use sph_core::pair::Columns;
     let Some(ghost) = archetype::<Ghost>(world) else {
         return Ok(());
     };
@@ -439,6 +441,22 @@ pub(crate) fn shift_no_slip(
     shifted
 }
 
+/// In 3D walls that do not slip are refused at setup (`GhostWalls`), so there are no
+/// no-slip velocities to shift; finding their signs is an internal error.
+#[cfg(feature = "dim3")]
+pub(crate) fn shift_no_slip(
+    _world: &hecs::World,
+    resources: &mut Resources,
+    _dv: impl Fn(usize) -> Vector + Sync,
+) -> Result<(), StepError> {
+    match resources.contains::<NoSlipSigns>() {
+        true => Err(StepError::Internal(
+            "no-slip ghost velocities in a 3D run: GhostWalls refuses them".into(),
+        )),
+        false => Ok(()),
+    }
+}
+
 /// Sets every ghost's pressure to its source's plus its carry, at least 0.
 pub(crate) fn sync_ghost_pressures(sim: &Sim, offsets: &[f64]) -> Result<(), StepError> {
     let (Some(fluid), Some(ghost)) = (
@@ -466,7 +484,7 @@ pub(crate) fn sync_ghost_pressures(sim: &Sim, offsets: &[f64]) -> Result<(), Ste
 /// it from about h/ds = 1.55 on.
 pub(crate) const RELAXATION_MARGIN: f64 = 0.85;
 
-/// The relaxed Jacobi iteration's stability bound on a uniform square lattice of
+/// The relaxed Jacobi iteration's stability bound on a uniform square (3D: cubic) lattice of
 /// spacing `ds`: 2 / lambda_max, with lambda_max the largest eigenvalue of D^-1 A.
 ///
 /// On the lattice the solve's operator (module docs: r_i's response to the pressures
@@ -478,7 +496,7 @@ pub(crate) const RELAXATION_MARGIN: f64 = 0.85;
 /// omega lambda(k) < 2 for every k. lambda_max grows with the neighbours a kernel
 /// reaches (Wendland: 2.60 at h/ds 1.3, 3.34 at 1.5, 5.68 at 2.0), which is why
 /// omega = 0.5 diverges from h/ds = 1.7 on (docs/physics.md, "DFSPH").
-/// lambda is maximised over k in [0, pi]^2 (per lattice step; the other quadrants
+/// lambda is maximised over k in [0, pi]^DIM (per lattice step; the other quadrants
 /// mirror it) by a grid search refined three times.
 /// Returns infinity (no cap) where there is nothing to bound: a spacing that is not a
 /// positive number, a support wider than 32 ds, or a kernel without a gradient.
@@ -489,40 +507,48 @@ pub(crate) fn jacobi_bound<K: Kernel>(kernel: &K, ds: f64) -> f64 {
     }
     let reach = reach as i64;
     let mut grads = Vec::new();
-    for i in -reach..=reach {
-        for j in -reach..=reach {
-            let x = DVec2::new(i as f64, j as f64) * ds;
-            let g = kernel.grad(x, x.length());
-            if g != DVec2::ZERO {
-                grads.push((DVec2::new(i as f64, j as f64), g));
-            }
+    for n in lattice(-reach, reach) {
+        let x = n * ds;
+        let g = kernel.grad(x, x.length());
+        if g != Vector::ZERO {
+            grads.push((n, g));
         }
     }
     let d: f64 = grads.iter().map(|(_, g)| g.length_squared()).sum();
     if d.is_nan() || d <= 0.0 {
         return f64::INFINITY;
     }
-    let lambda = |k: DVec2| {
-        let s: DVec2 = grads.iter().map(|&(x, g)| g * k.dot(x).sin()).sum();
+    let lambda = |k: Vector| {
+        let s: Vector = grads.iter().map(|&(x, g)| g * k.dot(x).sin()).sum();
         s.length_squared() / d
     };
-    const N: usize = 48;
-    let (mut best, mut at) = (0.0, DVec2::ZERO);
-    let (mut lo, mut width) = (DVec2::ZERO, DVec2::splat(std::f64::consts::PI));
+    // Grid points per axis: 49^2 in 2D, 17^3 in 3D (a 3D lattice has ~20 times the
+    // pairs, so the search keeps to about a second's work at setup either way).
+    let n = dim::pick(48.0, 16.0) as i64;
+    let (mut best, mut at) = (0.0, Vector::ZERO);
+    let (mut lo, mut width) = (Vector::ZERO, Vector::splat(std::f64::consts::PI));
     for _ in 0..4 {
-        for a in 0..=N {
-            for b in 0..=N {
-                let k = lo + width * DVec2::new(a as f64, b as f64) / N as f64;
-                let l = lambda(k);
-                if l > best {
-                    (best, at) = (l, k);
-                }
+        for a in lattice(0, n) {
+            let k = lo + width * a / n as f64;
+            let l = lambda(k);
+            if l > best {
+                (best, at) = (l, k);
             }
         }
         width /= 8.0;
         lo = at - width / 2.0;
     }
     2.0 / best
+}
+
+/// The integer points of the cube [from, to]^DIM, the first axis outermost.
+pub(crate) fn lattice(from: i64, to: i64) -> impl Iterator<Item = Vector> {
+    let axis = move || (from..=to).map(|i| i as f64);
+    #[cfg(not(feature = "dim3"))]
+    return axis().flat_map(move |i| axis().map(move |j| Vector::new(i, j)));
+    #[cfg(feature = "dim3")]
+    return axis()
+        .flat_map(move |i| axis().flat_map(move |j| axis().map(move |l| Vector::new(i, j, l))));
 }
 
 /// Caps a solve's relaxation at [`RELAXATION_MARGIN`] of the lattice bound
@@ -655,13 +681,16 @@ impl Report {
     }
 }
 
-#[cfg(test)]
+#[cfg(all(test, not(feature = "dim3")))]
 mod tests {
     use super::*;
     use crate::testing::everyone;
+    use crate::vocab::NoSlipVelocity;
+    use glam::DVec2;
     use sph_core::components::{Mass, Position};
     use sph_core::extremes::nan_max;
     use sph_core::kernel::{KernelKind, Wendland};
+    use sph_core::pair::Columns;
 
     /// A corner of a closed 0.2 m box holding a jittered 7 x 5 block of fluid (spacing
     /// 0.01 m, so near the floor and the left wall: single and double mirror images),

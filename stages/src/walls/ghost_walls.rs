@@ -34,7 +34,7 @@ use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure, Velocity};
 use sph_core::contract::Access;
-use sph_core::dim::Vector;
+use sph_core::dim::{Vector, DIM};
 use sph_core::pair::Columns;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
@@ -325,7 +325,6 @@ impl GhostWalls {
         let images = &self.images[..];
         // Only when a stage asked for them (the DFSPH solves); the walls move with the
         // tank, so every step.
-        #[cfg(not(feature = "dim3"))]
         if let Some(r) = sim.resources.get_mut::<GhostReflections>() {
             let lines = self.walls.lines();
             r.0.clear();
@@ -587,24 +586,28 @@ fn mirror_velocity(line: &WallLine, w: &WallPose, x: Vector, v: Vector, slip: Sl
 
 /// The linear part of a ghost's `Velocity` mirror (see [`GhostReflections`]): the
 /// product of each crossed wall's I - 2 n n^T, the linear part of [`mirror_velocity`]
-/// with free slip (2D: the DFSPH solves, which use it, are 2D only for now).
-#[cfg(not(feature = "dim3"))]
-fn reflection(lines: &[WallLine], img: &Image) -> [f64; 4] {
-    let mut m = [1.0, 0.0, 0.0, 1.0];
+/// with free slip, row by row.
+fn reflection(lines: &[WallLine], img: &Image) -> [f64; DIM * DIM] {
+    let mut m = [0.0; DIM * DIM];
+    for r in 0..DIM {
+        m[r * DIM + r] = 1.0;
+    }
     for k in img.walls() {
         let n = lines[k as usize].normal;
-        let l = [
-            1.0 - 2.0 * n.x * n.x,
-            -2.0 * n.x * n.y,
-            -2.0 * n.y * n.x,
-            1.0 - 2.0 * n.y * n.y,
-        ];
-        m = [
-            l[0] * m[0] + l[1] * m[2],
-            l[0] * m[1] + l[1] * m[3],
-            l[2] * m[0] + l[3] * m[2],
-            l[2] * m[1] + l[3] * m[3],
-        ];
+        // L = I - 2 n n^T, then m = L m (each entry summed from its first product, as
+        // written out by hand before: the 2D products are unchanged).
+        let l = |r: usize, c: usize| match r == c {
+            true => 1.0 - 2.0 * n[r] * n[c],
+            false => -2.0 * n[r] * n[c],
+        };
+        let mut next = [0.0; DIM * DIM];
+        for r in 0..DIM {
+            for c in 0..DIM {
+                next[r * DIM + c] =
+                    (1..DIM).fold(l(r, 0) * m[c], |s, q| s + l(r, q) * m[q * DIM + c]);
+            }
+        }
+        m = next;
     }
     m
 }
