@@ -390,20 +390,11 @@ fn hydrostatic_departure(sim: &sph_core::sim::Sim, h: f64) -> (f64, f64) {
 }
 
 /// What is not yet built in 3D is refused at setup, by name, not run as 2D: walls
-/// that do not slip, the MLS filter, a sensor's face and the piston's force.
+/// that do not slip and the MLS filter.
 #[test]
 fn what_3d_lacks_is_refused_at_setup() {
     let mut world = hecs::World::new();
     closed_box_3d(&mut world, Vector::splat(0.1));
-    world.spawn((sph_core::components::PressureSensor {
-        name: "P1".into(),
-        wall: hecs::Entity::DANGLING,
-        along: 0.05,
-        across: 0.05,
-        width: 0.01,
-        diameter: 0.01,
-        filter: 0.0,
-    },));
     let mut sim = crate::testing::sim(world);
     for (name, params, says) in [
         (
@@ -417,11 +408,6 @@ fn what_3d_lacks_is_refused_at_setup() {
             "(filter: Mls)",
             "`filter: Mls` is not yet built in 3D",
         ),
-        (
-            "probe",
-            "{}",
-            "sensor `P1`: a face (`diameter: 0.01`) is not yet built in 3D",
-        ),
     ] {
         let mut stage = crate::testing::stage(name, params);
         match stage.setup(&mut sim) {
@@ -432,4 +418,31 @@ fn what_3d_lacks_is_refused_at_setup() {
             ),
         }
     }
+}
+
+/// A 3D sensor's face is a disc on its wall ([`crate::transducer::face_points`]):
+/// every point within the radius, the centre among them, the points symmetric about
+/// it (so a linear pressure field reads its centre value), and their mean square
+/// distance from the centre within 5 % of the disc's R^2 / 2 (its polar moment over
+/// its area: a square grid clipped to the disc is near it; a square face would give
+/// 2 R^2 / 3, a segment R^2 / 3). A point sensor is its centre alone.
+#[test]
+fn a_sensor_face_in_3d_is_a_disc() {
+    let (d, ds) = (0.02, 0.01);
+    let pts = crate::transducer::face_points(d, ds);
+    let r = 0.5 * d;
+    assert!(pts.len() >= 9, "{} points", pts.len());
+    assert!(pts
+        .iter()
+        .all(|(u, v)| u * u + v * v <= r * r * (1.0 + 1e-9)));
+    assert!(pts.iter().any(|&(u, v)| u == 0.0 && v == 0.0));
+    let (su, sv) = pts.iter().fold((0.0, 0.0), |(a, b), (u, v)| (a + u, b + v));
+    assert!(su.abs() < 1e-15 && sv.abs() < 1e-15, "{su} {sv}");
+    let moment = pts.iter().map(|(u, v)| u * u + v * v).sum::<f64>() / pts.len() as f64;
+    assert!(
+        (moment / (0.5 * r * r) - 1.0).abs() < 0.05,
+        "mean square distance {moment}, disc {}",
+        0.5 * r * r
+    );
+    assert_eq!(crate::transducer::face_points(0.0, ds), vec![(0.0, 0.0)]);
 }

@@ -30,7 +30,7 @@ use sph_core::sim::Counter;
 type ReadCount = fn(&std::collections::BTreeMap<String, f64>) -> f64;
 use crate::vocab::{DensityFloored, WallReflections};
 
-use crate::transducer::{face_offsets, BoxFilter};
+use crate::transducer::{face_points, BoxFilter};
 use serde::{Deserialize, Serialize};
 use sph_core::checkpoint::{Dec, Enc};
 use sph_core::components::{
@@ -214,15 +214,8 @@ impl Stage for Probe {
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         let err = |m: String| SetupError::new("probe", m);
         self.sensors = sph_core::world::cloned::<PressureSensor>(&sim.world);
-        // A face is a segment along the wall in 2D; the disc on a 3D wall, and the
-        // piston's force over its area, are to come.
-        #[cfg(feature = "dim3")]
-        if let Some(s) = self.sensors.iter().find(|s| s.diameter > 0.0) {
-            return Err(err(format!(
-                "sensor `{}`: a face (`diameter: {}`) is not yet built in 3D; give a point (no `diameter`)",
-                s.name, s.diameter
-            )));
-        }
+        // A face is a segment along the wall in 2D and a disc on a 3D wall; the
+        // piston's force over its area is to come in 3D.
         #[cfg(feature = "dim3")]
         if self.params.piston {
             return Err(err(
@@ -568,7 +561,7 @@ impl Probe {
         let mut filters = self.filters.iter();
         for s in &self.sensors {
             for (_, m) in &mut self.methods {
-                row.push(reading(sim, particles, s, m.as_mut(), 0.0)?);
+                row.push(reading(sim, particles, s, m.as_mut(), (0.0, 0.0))?);
                 if s.filter > 0.0 {
                     row.push(filters.next().map_or(0.0, BoxFilter::mean));
                 } else if s.transducer() {
@@ -604,24 +597,27 @@ impl Probe {
     }
 }
 
-/// Sensor `s`'s pressure by method `m` at `offset` along the wall from its centre.
+/// Sensor `s`'s pressure by method `m` at `offset` = (along, across) on the wall from
+/// its centre (across is 0 in 2D).
 fn reading(
     sim: &Sim,
     particles: Particles,
     s: &PressureSensor,
     m: &mut dyn ExtractionMethod,
-    offset: f64,
+    offset: (f64, f64),
 ) -> Result<f64, StepError> {
     let wall = &*sim
         .world
         .get::<&WallPose>(s.wall)
         .map_err(|_| StepError::Internal("a probed wall is not in the world".into()))?;
-    let along = s.along + offset;
+    let along = s.along + offset.0;
+    #[cfg(not(feature = "dim3"))]
+    let _ = offset.1;
     let mut site = Site {
         wall,
         along,
         #[cfg(feature = "dim3")]
-        across: s.across,
+        across: s.across + offset.1,
         width: s.width,
         carry: Carry {
             rho0: sim.constants.eos.rho0,
@@ -632,19 +628,19 @@ fn reading(
     m.pressure(sim, particles, &site)
 }
 
-/// Sensor `s`'s pressure by method `m`, averaged over its face.
+/// Sensor `s`'s pressure by method `m`, averaged over its face ([`face_points`]).
 fn face(
     sim: &Sim,
     particles: Particles,
     s: &PressureSensor,
     m: &mut dyn ExtractionMethod,
 ) -> Result<f64, StepError> {
-    let offsets = face_offsets(s.diameter, sim.constants.spacing);
+    let points = face_points(s.diameter, sim.constants.spacing);
     let mut sum = 0.0;
-    for &o in &offsets {
+    for &o in &points {
         sum += reading(sim, particles, s, m, o)?;
     }
-    Ok(sum / offsets.len() as f64)
+    Ok(sum / points.len() as f64)
 }
 
 // 2D set-ups; the 3D build's own tests are in `tests3d` modules.
@@ -652,6 +648,7 @@ fn face(
 pub(super) mod tests {
     use super::*;
     use crate::testing::out_dir;
+    use crate::transducer::face_offsets;
     use glam::DVec2;
     use sph_core::world::{column, column_mut};
 

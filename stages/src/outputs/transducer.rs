@@ -19,6 +19,36 @@ pub fn face_offsets(diameter: f64, ds: f64) -> Vec<f64> {
         .collect()
 }
 
+/// Points across a face of `diameter` as (along, across) offsets on the wall from its
+/// centre: in 2D [`face_offsets`] along the wall (across 0); in 3D the face is a disc,
+/// and its points are those of the square grid of the same offsets in both directions
+/// that lie in the disc (a grid point every quarter spacing, at most 9 a side, the
+/// ends of each axis included), so their mean is the disc's area mean. The centre
+/// alone for a point sensor.
+pub fn face_points(diameter: f64, ds: f64) -> Vec<(f64, f64)> {
+    #[cfg(not(feature = "dim3"))]
+    return face_offsets(diameter, ds)
+        .into_iter()
+        .map(|o| (o, 0.0))
+        .collect();
+    #[cfg(feature = "dim3")]
+    {
+        if !(diameter > 0.0 && ds > 0.0) {
+            return vec![(0.0, 0.0)];
+        }
+        // At most 9 a side: 69 points in the disc, each reading a neighbour sum.
+        let n = ((diameter / (0.25 * ds)).ceil() as usize + 1).clamp(3, 9);
+        let axis: Vec<f64> = (0..n)
+            .map(|k| diameter * (k as f64 / (n - 1) as f64 - 0.5))
+            .collect();
+        let r2 = 0.25 * diameter * diameter * (1.0 + 1e-12);
+        axis.iter()
+            .flat_map(|&u| axis.iter().map(move |&v| (u, v)))
+            .filter(|(u, v)| u * u + v * v <= r2)
+            .collect()
+    }
+}
+
 /// A box filter over the last `window` seconds of readings, each weighted by the
 /// time since the reading before it.
 #[derive(Clone, Debug, Default, PartialEq)]
