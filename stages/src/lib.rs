@@ -21,7 +21,6 @@ mod tests3d;
 pub mod walls;
 pub use walls::ghost_walls;
 pub(crate) use walls::wall_work;
-#[cfg(not(feature = "dim3"))]
 pub use walls::{wall_particles, wall_pressure};
 
 pub mod equations;
@@ -60,13 +59,11 @@ pub fn register_standard(registry: &mut StageRegistry) {
     divergence_solve::register(registry);
     density_solve::register(registry);
     snapshots::register(registry);
+    wall_particles::register(registry);
+    wall_pressure::register(registry);
     // Not yet built in 3D (docs/architecture.md, "Two and three dimensions").
     #[cfg(not(feature = "dim3"))]
-    {
-        wall_particles::register(registry);
-        wall_pressure::register(registry);
-        shifting::register(registry);
-    }
+    shifting::register(registry);
 }
 
 /// A registry holding the standard stages.

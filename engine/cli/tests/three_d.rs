@@ -203,12 +203,17 @@ fn a_scene_of_the_other_dimension_is_refused_with_the_field() {
 /// 2 s) against the measured record, through the run's own comparison
 /// (`reference.md`, the scenario's `reference`), with both pipelines: the water
 /// heights H2 (in front of the box) and H4 (in the reservoir) within the 10 %
-/// normalised mean absolute error over 0-2 s (measured 4.2 % and 1.4 %
-/// weakly-compressible, 5.1 % and 1.1 % DFSPH), and P1's arrival (its first 1 kPa)
-/// within the 10 % (measured +1.8 % and +6.8 %). P1's first peak is not held
-/// here: the weakly-compressible impact rings acoustically and DFSPH's is a one-step
-/// pulse, both several times the measured peak at any resolution run so far
-/// (docs/validation.md, "3D", has the peak per resolution).
+/// normalised mean absolute error over 0-2 s (measured 4.6 % and 1.0 %
+/// weakly-compressible on wall particles, 5.1 % and 1.1 % DFSPH on mirrors), and P1's
+/// arrival (its first 1 kPa) within the 10 % (measured +9.9 % and +6.8 %: the
+/// coarse front reaches the sensor late, +4.4 % at 0.025 m). On wall particles P1's
+/// first peak (the largest 1 ms mean within 0.1 s of arrival) is within the 25
+/// % here (measured +17.7 %; on mirrors +633 %), and the wall safeguard acts at most 50
+/// times in 2 s (measured 5; 31,070 on mirrors). Neither holds at finer resolution
+/// (+115 % at 0.025 m, 458 reflections), so this holds the coarse run, not the
+/// acceptance; DFSPH's peak is a one-step pulse, several times the measured one at
+/// every resolution, and is not held (docs/validation.md, "3D", has both per
+/// resolution).
 #[test]
 fn spheric_test2_coarse_heights_and_arrival_match_the_measurements() {
     for scene in TEST2 {
@@ -243,6 +248,23 @@ fn spheric_test2_coarse_heights_and_arrival_match_the_measurements() {
             arrival.abs() <= 10.0,
             "{scene}: P1 arrives {arrival} % off\n{md}"
         );
+        if scene == "dam_break_obstacle.ron" {
+            let peak = percent(&row("P1.shepard.transducer")[7]);
+            assert!(
+                peak.abs() <= 25.0,
+                "{scene}: P1's first peak {peak} % off\n{md}"
+            );
+            let summary = std::fs::read_to_string(out.join("summary.json")).unwrap();
+            let json: serde_json::Value = serde_json::from_str(&summary).unwrap();
+            // The diagnostics name only the guards that acted.
+            let reflections = json["diagnostics"]["wall_reflections"]
+                .as_f64()
+                .unwrap_or(0.0);
+            assert!(
+                reflections <= 50.0,
+                "{scene}: {reflections} wall reflections\n{summary}"
+            );
+        }
         let _ = std::fs::remove_dir_all(&out);
     }
 }

@@ -43,6 +43,15 @@ pub struct Corner {
     edge: usize,
 }
 
+impl Corner {
+    /// The meeting edge (its two ends) in `walls`: the same walls in [`Walls`] order,
+    /// at any pose (at rest, or now); None if `walls` is not that long (3D).
+    #[cfg(feature = "dim3")]
+    pub fn edge_in(&self, walls: &[WallPose]) -> Option<(Vector, Vector)> {
+        walls.get(self.end_of).map(|w| w.edge(self.edge))
+    }
+}
+
 /// Where a particle has crossed the walls (see [`Walls::crossed`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Crossing {

@@ -21,11 +21,11 @@
 //! `GhostReflections`, which only `GhostWalls` writes, so the loader refuses them with
 //! wall particles.
 
-use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::components::{Density, Ghost, Mass, MirrorWall, Position, Pressure, Velocity, Wall};
 use sph_core::contract::Access;
+use sph_core::dim::Vector;
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{WallPose, Walls};
@@ -68,7 +68,7 @@ pub fn register(registry: &mut StageRegistry) {
 #[derive(Clone, Copy, Debug)]
 struct Site {
     wall: usize,
-    rest: DVec2,
+    rest: Vector,
 }
 
 pub struct WallParticles {
@@ -181,59 +181,164 @@ fn rest_walls(world: &hecs::World) -> Vec<WallPose> {
     rest.into_iter().map(|(_, w)| w).collect()
 }
 
-/// The wall particles' sites and volumes [m^2]: for each wall a band of `layers`
-/// rows behind it, round(length / ds) particles along it (spaced length / n, so the
-/// band ends at the wall's ends), and for each convex corner of two walls on one body
-/// the `layers` x `layers` parallelogram behind both, on the spacing ds along each
-/// normal. At a reentrant corner (a step: inner angle above 180 degrees) the two
-/// bands overlap behind both walls; the second wall's band leaves that overlap to the
-/// first's, so it is filled once.
+/// The wall particles' sites and volumes [m^DIM] (docs/physics.md, "Walls: fixed wall
+/// particles"):
+/// - for each wall a band of `layers` rows behind it, round(length / ds) particles
+///   along it (spaced length / n, so the band ends at the wall's ends; in 3D the same
+///   across its breadth);
+/// - for each convex corner of two walls on one body the `layers` x `layers`
+///   parallelogram behind both, on the spacing ds along each normal (in 3D a prism of
+///   them along the meeting edge);
+/// - in 3D, for each vertex where three walls on one body meet pairwise convex, the
+///   `layers`^3 parallelepiped behind all three.
+///
+/// At a reentrant corner (a step, or a box's edge seen from the water: inner angle
+/// above 180 degrees) the two bands overlap behind both walls; the second wall's band
+/// leaves that overlap to the first's, so it is filled once. Where the bands of two
+/// walls of one body that do not meet overlap (the opposite faces of a solid thinner
+/// than two bands), a site is left to the wall whose plane it is nearer, and a band
+/// that would reach through a solid thinner than itself stops at its far face. A corner's
+/// site that lies in a wall's band (the floor under a box standing on it) is left to
+/// the band.
 fn lay_out(rest: &[WallPose], walls: &Walls, ds: f64, layers: usize) -> (Vec<Site>, Vec<f64>) {
     let (mut sites, mut volumes) = (Vec::new(), Vec::new());
     let lines: Vec<WallLine> = rest.iter().map(WallLine::of).collect();
     let depth = layers as f64 * ds;
-    // In wall k's band: behind its line, within the band's depth, alongside it.
-    let in_band = |k: usize, x: DVec2| lines[k].behind(x, depth);
+    let same_body = |j: usize, k: usize| rest[j].body == rest[k].body;
+    // In wall k's band: behind its line (plane), within the band's depth, alongside it.
+    let in_band = |k: usize, x: Vector| lines[k].behind(x, depth);
+    let in_any_band =
+        |k: usize, x: Vector| (0..lines.len()).any(|j| same_body(j, k) && in_band(j, x));
+    let meet = |j: usize, k: usize| {
+        let (first, second) = (j.min(k), j.max(k));
+        walls
+            .corners()
+            .iter()
+            .any(|c| c.first == first && c.second == second)
+    };
     for (k, line) in lines.iter().enumerate() {
         let n = ((line.length / ds).round() as usize).max(1);
         let along = line.length / n as f64;
+        #[cfg(not(feature = "dim3"))]
+        let (m, volume) = (1, along * ds);
+        #[cfg(feature = "dim3")]
+        let (m, across) = {
+            let m = ((line.breadth / ds).round() as usize).max(1);
+            (m, line.breadth / m as f64)
+        };
+        #[cfg(feature = "dim3")]
+        let volume = along * across * ds;
         // The earlier walls this one meets at a reentrant corner on the same body.
         let yields: Vec<usize> = walls
             .corners()
             .iter()
-            .filter(|c| !c.convex && c.second == k && rest[c.first].body == rest[k].body)
+            .filter(|c| !c.convex && c.second == k && same_body(c.first, k))
             .map(|c| c.first)
             .collect();
+        // The walls of the same body this one does not meet (a solid's far faces).
+        let facing: Vec<usize> = (0..lines.len())
+            .filter(|&j| j != k && same_body(j, k) && !meet(j, k))
+            .collect();
         for i in 0..n {
-            for l in 0..layers {
-                let x = line.a + (i as f64 + 0.5) * along * line.tangent
-                    - (l as f64 + 0.5) * ds * line.normal;
-                if yields.iter().any(|&f| in_band(f, x)) {
-                    continue;
+            for _j in 0..m {
+                for l in 0..layers {
+                    let x = line.a + (i as f64 + 0.5) * along * line.tangent
+                        - (l as f64 + 0.5) * ds * line.normal;
+                    #[cfg(feature = "dim3")]
+                    let x = x + (_j as f64 + 0.5) * across * line.across;
+                    if yields.iter().any(|&f| in_band(f, x)) {
+                        continue;
+                    }
+                    // Nearer f's plane (both distances negative behind), or as near
+                    // (to round-off) and f the earlier wall.
+                    let nearer = |f: usize| {
+                        let (df, dk) = (lines[f].distance(x), line.distance(x));
+                        df > dk + 1e-9 * ds || (df >= dk - 1e-9 * ds && f < k)
+                    };
+                    if facing.iter().any(|&f| in_band(f, x) && nearer(f)) {
+                        continue;
+                    }
+                    // Through a solid thinner than the band, out in front of its far
+                    // face: in the water.
+                    let foot = x + (l as f64 + 0.5) * ds * line.normal;
+                    if facing
+                        .iter()
+                        .any(|&f| lines[f].behind(foot, depth) && lines[f].distance(x) >= 0.0)
+                    {
+                        continue;
+                    }
+                    sites.push(Site { wall: k, rest: x });
+                    volumes.push(volume);
                 }
-                sites.push(Site { wall: k, rest: x });
-                volumes.push(along * ds);
             }
         }
     }
-    for c in walls.corners() {
+    let convex: Vec<_> = walls
+        .corners()
+        .iter()
+        .filter(|c| c.convex && same_body(c.first, c.second))
+        .collect();
+    for c in &convex {
         let (a, b) = (&lines[c.first], &lines[c.second]);
-        if !c.convex || rest[c.first].body != rest[c.second].body {
-            continue;
+        // Where the corner's parallelogram starts, and how many stand along the edge
+        // (3D), each how far apart.
+        #[cfg(not(feature = "dim3"))]
+        let (start, edge, m, along, volume) = {
+            let Some(meet) = intersection(a, b) else {
+                continue;
+            };
+            let area = ds * ds * a.normal.perp_dot(b.normal).abs();
+            (meet, Vector::ZERO, 1, 0.0, area)
+        };
+        #[cfg(feature = "dim3")]
+        let (start, edge, m, along, volume) = {
+            let Some((p, q)) = c.edge_in(rest) else {
+                continue;
+            };
+            let length = p.distance(q);
+            let m = ((length / ds).round() as usize).max(1);
+            let along = length / m as f64;
+            let volume = ds * ds * along * a.normal.cross(b.normal).length();
+            (p, (q - p).normalize_or_zero(), m, along, volume)
+        };
+        for e in 0..m {
+            for i in 0..layers {
+                for j in 0..layers {
+                    let x = start + (e as f64 + 0.5) * along * edge
+                        - (i as f64 + 0.5) * ds * a.normal
+                        - (j as f64 + 0.5) * ds * b.normal;
+                    if in_any_band(c.first, x) {
+                        continue;
+                    }
+                    sites.push(Site {
+                        wall: c.first,
+                        rest: x,
+                    });
+                    volumes.push(volume);
+                }
+            }
         }
-        let Some(meet) = intersection(a, b) else {
+    }
+    #[cfg(feature = "dim3")]
+    for (f, g, h) in vertices(&convex) {
+        let (a, b, c) = (&lines[f], &lines[g], &lines[h]);
+        let Some(at) = vertex(a, b, c) else {
             continue;
         };
-        let area = ds * ds * a.normal.perp_dot(b.normal).abs();
+        let volume = ds * ds * ds * a.normal.dot(b.normal.cross(c.normal)).abs();
         for i in 0..layers {
             for j in 0..layers {
-                sites.push(Site {
-                    wall: c.first,
-                    rest: meet
+                for l in 0..layers {
+                    let x = at
                         - (i as f64 + 0.5) * ds * a.normal
-                        - (j as f64 + 0.5) * ds * b.normal,
-                });
-                volumes.push(area);
+                        - (j as f64 + 0.5) * ds * b.normal
+                        - (l as f64 + 0.5) * ds * c.normal;
+                    if in_any_band(f, x) {
+                        continue;
+                    }
+                    sites.push(Site { wall: f, rest: x });
+                    volumes.push(volume);
+                }
             }
         }
     }
@@ -241,15 +346,48 @@ fn lay_out(rest: &[WallPose], walls: &Walls, ds: f64, layers: usize) -> (Vec<Sit
 }
 
 /// Where two walls' lines cross; None for parallel lines.
-fn intersection(a: &WallLine, b: &WallLine) -> Option<DVec2> {
+#[cfg(not(feature = "dim3"))]
+fn intersection(a: &WallLine, b: &WallLine) -> Option<Vector> {
     // a.a + s a.t on b's line: (a.a + s a.t - b.a) . b.n = 0.
     let denom = a.tangent.dot(b.normal);
     (denom.abs() > 1e-12).then(|| a.a + ((b.a - a.a).dot(b.normal) / denom) * a.tangent)
 }
 
-#[cfg(test)]
+/// The triples of walls (f < g < h) that meet pairwise at the convex corners
+/// `convex` of one body: a box tank's vertices (3D).
+#[cfg(feature = "dim3")]
+fn vertices(convex: &[&sph_core::walls::Corner]) -> Vec<(usize, usize, usize)> {
+    let pair = |f: usize, g: usize| convex.iter().any(|c| c.first == f && c.second == g);
+    let mut out = Vec::new();
+    for c in convex {
+        for d in convex {
+            // c = (f, g), d = (f, h) with g < h, and (g, h) a convex corner too.
+            if d.first == c.first && d.second > c.second && pair(c.second, d.second) {
+                out.push((c.first, c.second, d.second));
+            }
+        }
+    }
+    out
+}
+
+/// The point on all three planes; None where they do not meet in one point (3D).
+#[cfg(feature = "dim3")]
+fn vertex(a: &WallLine, b: &WallLine, c: &WallLine) -> Option<Vector> {
+    // x . n_k = a_k . n_k for each plane: Cramer's rule by triple products.
+    let det = a.normal.dot(b.normal.cross(c.normal));
+    let (da, db, dc) = (a.a.dot(a.normal), b.a.dot(b.normal), c.a.dot(c.normal));
+    (det.abs() > 1e-12).then(|| {
+        (da * b.normal.cross(c.normal)
+            + db * c.normal.cross(a.normal)
+            + dc * a.normal.cross(b.normal))
+            / det
+    })
+}
+
+#[cfg(all(test, not(feature = "dim3")))]
 mod tests {
     use super::*;
+    use glam::DVec2;
     use sph_core::world::column;
 
     fn line(a: (f64, f64), b: (f64, f64)) -> WallPose {

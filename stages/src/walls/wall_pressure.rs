@@ -39,11 +39,11 @@
 //! `single_velocity: true` every term reads the viscous velocity (their docs below).
 
 use crate::vocab::{NoSlipSigns, NoSlipVelocity};
-use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::components::{Density, Fluid, Ghost, MirrorWall, Position, Pressure, Velocity};
 use sph_core::contract::Access;
+use sph_core::dim::Vector;
 use sph_core::kernel::Kernel;
 use sph_core::pair::Columns;
 use sph_core::sim::Sim;
@@ -117,6 +117,14 @@ pub fn register(registry: &mut StageRegistry) {
                     "false when `separation` is true: separation sets the wall particles' normal velocity for continuity alone",
                 ));
             }
+            #[cfg(feature = "dim3")]
+            if !p.single_velocity {
+                return Err(sph_core::ParamError::new(
+                    "single_velocity",
+                    false,
+                    "true in 3D: the wall particles' second velocity for the viscous terms is a two-component column, built in 2D only, so in 3D every term reads the one velocity `slip` and `mirror` set",
+                ));
+            }
             if p.mirror && p.separation {
                 return Err(sph_core::ParamError::new(
                     "mirror",
@@ -137,6 +145,8 @@ pub fn register(registry: &mut StageRegistry) {
                 seen: Vec::new(),
                 start: Vec::new(),
                 inverted: None,
+                #[cfg(feature = "dim3")]
+                scratch: Vec::new(),
             })
         },
     );
@@ -149,8 +159,8 @@ pub fn register(registry: &mut StageRegistry) {
 struct Sums {
     w: f64,
     pw: f64,
-    rho_r: DVec2,
-    vw: DVec2,
+    rho_r: Vector,
+    vw: Vector,
     raised: f64,
     tension: f64,
     /// With `largest`: the largest carried pressure (-inf before any).
@@ -168,13 +178,17 @@ pub struct WallPressure {
     sums: Vec<Sums>,
     /// g - a_w per ghost, for the one-sided sums (zero elsewhere); kept between
     /// steps only to reuse its allocation.
-    pull: Vec<DVec2>,
+    pull: Vec<Vector>,
     /// The fluid particles each wall particle sees, in fluid order (those of ghost g
     /// at `seen[start[g]..start[g + 1]]`); kept only to reuse the allocations.
     seen: Vec<u32>,
     start: Vec<u32>,
     /// The lists `seen` inverts: the grid's build count and the fluid and ghost counts.
     inverted: Option<(u64, usize, usize)>,
+    /// The wall particles' one velocity before it is written (3D; kept only to reuse
+    /// its allocation).
+    #[cfg(feature = "dim3")]
+    scratch: Vec<Vector>,
 }
 
 impl Stage for WallPressure {
@@ -257,7 +271,7 @@ impl Stage for WallPressure {
         let (eos, gravity) = (c.eos, c.gravity);
         let pull = &mut self.pull;
         pull.clear();
-        pull.resize(gx.len(), DVec2::ZERO);
+        pull.resize(gx.len(), Vector::ZERO);
         if self.one_sided || self.largest {
             for (k, pull) in pull.iter_mut().enumerate() {
                 if gs[k].is_wall_particle() {
@@ -341,8 +355,16 @@ impl Stage for WallPressure {
         let mut gp = column_mut::<Pressure>(ghost)?;
         let mut gr = column_mut::<Density>(ghost)?;
         let mut gv = column_mut::<Velocity>(ghost)?;
-        let columns = sim.resources.get_or_default::<Columns>();
-        let mut viscous = columns.remove::<NoSlipVelocity>().unwrap_or_default();
+        #[cfg(not(feature = "dim3"))]
+        let mut viscous = sim
+            .resources
+            .get_or_default::<Columns>()
+            .remove::<NoSlipVelocity>()
+            .unwrap_or_default();
+        // In 3D every term reads one velocity (`single_velocity`, checked when the
+        // stage is built): this is only the step's scratch.
+        #[cfg(feature = "dim3")]
+        let mut viscous = std::mem::take(&mut self.scratch);
         viscous.clear();
         viscous.extend(gv.iter().map(|v| v.0));
         // No stage changes fluid velocities between here and the forces (the DFSPH
@@ -374,7 +396,7 @@ impl Stage for WallPressure {
             }
             let (v_b, u) = (wall.body.velocity_at(x), s.vw / s.w);
             viscous[k] = match self.slip {
-                Slip::FreeSlip => v_b + (u - v_b).dot(wall.tangent()) * wall.tangent(),
+                Slip::FreeSlip => v_b + along_wall(wall, u - v_b),
                 Slip::NoSlip => 2.0 * v_b - u,
                 Slip::WallVelocity => v_b,
             };
@@ -392,10 +414,15 @@ impl Stage for WallPressure {
             }
             gr[k].0 = eos.density(gp[k].0);
         }
+        #[cfg(not(feature = "dim3"))]
         if !self.single_velocity {
             sim.resources
                 .get_or_default::<Columns>()
                 .insert::<NoSlipVelocity>(NoSlipVelocity::SCOPE, viscous)?;
+        }
+        #[cfg(feature = "dim3")]
+        {
+            self.scratch = viscous;
         }
         Ok(())
     }
@@ -417,9 +444,19 @@ impl Stage for WallPressure {
     }
 }
 
-#[cfg(test)]
+/// The part of `v` along the wall: along its tangent in 2D, in its plane in 3D.
+#[inline]
+fn along_wall(wall: &WallPose, v: Vector) -> Vector {
+    #[cfg(not(feature = "dim3"))]
+    return v.dot(wall.tangent()) * wall.tangent();
+    #[cfg(feature = "dim3")]
+    return v - v.dot(wall.normal()) * wall.normal();
+}
+
+#[cfg(all(test, not(feature = "dim3")))]
 mod tests {
     use super::*;
+    use glam::DVec2;
     use sph_core::components::Mass;
 
     /// A closed 0.2 m box lined with wall particles and a row of five fluid particles
