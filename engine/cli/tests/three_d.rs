@@ -204,8 +204,8 @@ fn a_scene_of_the_other_dimension_is_refused_with_the_field() {
 /// (`reference.md`, the scenario's `reference`), with both pipelines: the water
 /// heights H2 (in front of the box) and H4 (in the reservoir) within the 10 %
 /// normalised mean absolute error over 0-2 s (measured 4.6 % and 1.0 %
-/// weakly-compressible on wall particles, 5.1 % and 1.1 % DFSPH on mirrors), and P1's
-/// arrival (its first 1 kPa) within the 10 % (measured +9.9 % and +6.8 %: the
+/// weakly-compressible on wall particles, 4.3 % and 1.3 % DFSPH on mirrors), and P1's
+/// arrival (its first 1 kPa) within the 10 % (measured +9.9 % and +5.5 %: the
 /// coarse front reaches the sensor late, +4.4 % at 0.025 m). On wall particles P1's
 /// first peak (the largest 1 ms mean within 0.1 s of arrival) is within the 25
 /// % here (measured +17.7 %; on mirrors +633 %), and the wall safeguard acts at most 50

@@ -376,8 +376,17 @@ fn corners_of(walls: impl Iterator<Item = WallPose> + Clone, out: &mut Vec<Corne
                 else {
                     continue;
                 };
-                // Convex when each wall's centre is on the other's fluid side.
-                let convex = u.distance(v.centre()) > 0.0 && v.distance(u.centre()) > 0.0;
+                // Convex when part of each wall lies on the other's fluid side (the
+                // water's angle at the edge below 180 degrees): a tank's edge, or a box's
+                // foot on a floor that runs on past it; not a box's own edges, where
+                // each face lies wholly behind the other's plane. (The walls' centres
+                // would call three feet of a box off the floor's centre reentrant.)
+                let in_front = |w: &WallPose, of: &WallPose| {
+                    [w.a, w.b, w.c, w.b + w.c - w.a]
+                        .iter()
+                        .any(|&x| of.distance(x) > 1e-9)
+                };
+                let convex = in_front(v, u) && in_front(u, v);
                 out.push(Corner {
                     first: i,
                     second: j,
@@ -571,6 +580,79 @@ mod tests3d {
             ends.contains(&[0.0, 0.0, 0.0]) && ends.contains(&[0.0, 0.0, 1.0]),
             "{ends:?}"
         );
+    }
+
+    /// A box standing on the floor of the tank, off the floor's centre (x 0.6-0.8, z
+    /// 0.4-0.6): its four feet meet the floor convex (the water's angle there is 90
+    /// degrees, whichever side of the box the floor's centre lies), its own eight
+    /// edges reentrant, and the tank's eight edges stay convex. Judged by the walls'
+    /// centres, the feet on the far side of the floor's centre came out reentrant.
+    #[test]
+    fn a_box_s_feet_on_the_floor_are_convex_and_its_own_edges_are_not() {
+        let mut world = tank();
+        let (lo, hi) = (Vector::new(0.6, 0.0, 0.4), Vector::new(0.8, 0.2, 0.6));
+        let centre = 0.5 * (lo + hi);
+        let v = Vector::new;
+        for (name, a, b, c) in [
+            (
+                "box_top",
+                v(lo.x, hi.y, lo.z),
+                v(hi.x, hi.y, lo.z),
+                v(lo.x, hi.y, hi.z),
+            ),
+            (
+                "box_left",
+                v(lo.x, 0.0, lo.z),
+                v(lo.x, hi.y, lo.z),
+                v(lo.x, 0.0, hi.z),
+            ),
+            (
+                "box_right",
+                v(hi.x, 0.0, lo.z),
+                v(hi.x, hi.y, lo.z),
+                v(hi.x, 0.0, hi.z),
+            ),
+            (
+                "box_back",
+                v(lo.x, 0.0, lo.z),
+                v(hi.x, 0.0, lo.z),
+                v(lo.x, hi.y, lo.z),
+            ),
+            (
+                "box_front",
+                v(lo.x, 0.0, hi.z),
+                v(hi.x, 0.0, hi.z),
+                v(lo.x, hi.y, hi.z),
+            ),
+        ] {
+            // Each face's normal (c - a) x (b - a) out of the box, into the water.
+            let out = (c - a).cross(b - a).dot(0.5 * (b + c) - centre) > 0.0;
+            let (b, c) = if out { (b, c) } else { (c, b) };
+            let w = wall(name, a.into(), b.into(), c.into());
+            let now = w.at_rest();
+            world.spawn((w, now));
+        }
+        let set = Walls::of(&world);
+        let corners = set.corners();
+        let is_box = |k: usize| k >= 5;
+        let feet: Vec<_> = corners
+            .iter()
+            .filter(|c| c.first == 0 && is_box(c.second))
+            .collect();
+        assert_eq!(feet.len(), 4, "{corners:?}");
+        assert!(feet.iter().all(|c| c.convex), "{feet:?}");
+        let own: Vec<_> = corners
+            .iter()
+            .filter(|c| is_box(c.first) && is_box(c.second))
+            .collect();
+        assert_eq!(own.len(), 8, "{corners:?}");
+        assert!(own.iter().all(|c| !c.convex), "{own:?}");
+        let tank: Vec<_> = corners
+            .iter()
+            .filter(|c| !is_box(c.first) && !is_box(c.second))
+            .collect();
+        assert_eq!(tank.len(), 8);
+        assert!(tank.iter().all(|c| c.convex));
     }
 
     #[test]
