@@ -493,7 +493,8 @@ impl Kick<'_> {
             && rho.0 <= self.rho_band.1
             && p.cmpge(self.lo).all()
             && p.cmple(self.hi).all()
-            && (clear || self.walls.crossed(p, self.reach).is_none());
+            // A reflection pass that bounced nothing has already found no crossing.
+            && (clear || (self.reflect && !hit) || self.walls.crossed(p, self.reach).is_none());
         (hit, raised, de, ok)
     }
 }

@@ -145,8 +145,6 @@ pub fn register(registry: &mut StageRegistry) {
                 seen: Vec::new(),
                 start: Vec::new(),
                 inverted: None,
-                #[cfg(feature = "dim3")]
-                scratch: Vec::new(),
             })
         },
     );
@@ -185,10 +183,6 @@ pub struct WallPressure {
     start: Vec<u32>,
     /// The lists `seen` inverts: the grid's build count and the fluid and ghost counts.
     inverted: Option<(u64, usize, usize)>,
-    /// The wall particles' one velocity before it is written (3D; kept only to reuse
-    /// its allocation).
-    #[cfg(feature = "dim3")]
-    scratch: Vec<Vector>,
 }
 
 impl Stage for WallPressure {
@@ -269,16 +263,6 @@ impl Stage for WallPressure {
         };
         let c = &sim.constants;
         let (eos, gravity) = (c.eos, c.gravity);
-        let pull = &mut self.pull;
-        pull.clear();
-        pull.resize(gx.len(), Vector::ZERO);
-        if self.one_sided || self.largest {
-            for (k, pull) in pull.iter_mut().enumerate() {
-                if gs[k].is_wall_particle() {
-                    *pull = gravity - wall_of(k)?.body.acceleration_at(gx[k].0);
-                }
-            }
-        }
         // The fluid particles each wall particle sees, in fluid order: the fluid's
         // lists inverted by a counting sort, so that each wall particle adds its fluid
         // neighbours in the order of a loop over the fluid, on any number of threads.
@@ -327,6 +311,17 @@ impl Stage for WallPressure {
             }
         }
         self.inverted = Some(lists);
+        // The wall's pull (gravity less its own acceleration), where fluid is near.
+        let pull = &mut self.pull;
+        pull.clear();
+        pull.resize(gx.len(), Vector::ZERO);
+        if self.one_sided || self.largest {
+            for (k, pull) in pull.iter_mut().enumerate() {
+                if gs[k].is_wall_particle() && start[k + 1] > start[k] {
+                    *pull = gravity - wall_of(k)?.body.acceleration_at(gx[k].0);
+                }
+            }
+        }
         let (support, one_sided) = (c.support(), self.one_sided);
         let (seen, start, pull) = (&self.seen[..], &self.start[..], &self.pull[..]);
         let (fx, fp, fr, fv, gx) = (&fx[..], &fp[..], &fr[..], &fv[..], &gx[..]);
@@ -355,18 +350,22 @@ impl Stage for WallPressure {
         let mut gp = column_mut::<Pressure>(ghost)?;
         let mut gr = column_mut::<Density>(ghost)?;
         let mut gv = column_mut::<Velocity>(ghost)?;
+        // The second velocity's column, where the terms read one (2D only: in 3D
+        // `single_velocity` is required when the stage is built), starting from the
+        // ghosts' velocities; with one velocity it is written straight into them.
         #[cfg(not(feature = "dim3"))]
-        let mut viscous = sim
-            .resources
-            .get_or_default::<Columns>()
-            .remove::<NoSlipVelocity>()
-            .unwrap_or_default();
-        // In 3D every term reads one velocity (`single_velocity`, checked when the
-        // stage is built): this is only the step's scratch.
+        let mut viscous = (!self.single_velocity).then(|| {
+            let mut column = sim
+                .resources
+                .get_or_default::<Columns>()
+                .remove::<NoSlipVelocity>()
+                .unwrap_or_default();
+            column.clear();
+            column.extend(gv.iter().map(|v| v.0));
+            column
+        });
         #[cfg(feature = "dim3")]
-        let mut viscous = std::mem::take(&mut self.scratch);
-        viscous.clear();
-        viscous.extend(gv.iter().map(|v| v.0));
+        let mut viscous: Option<Vec<Vector>> = None;
         // No stage changes fluid velocities between here and the forces (the DFSPH
         // solves, which would, refuse wall particles).
         let signs = sim.resources.get_or_default::<NoSlipSigns>();
@@ -395,7 +394,7 @@ impl Stage for WallPressure {
                 gp[k].0 = gp[k].0.max(s.tension);
             }
             let (v_b, u) = (wall.body.velocity_at(x), s.vw / s.w);
-            viscous[k] = match self.slip {
+            let mut visc = match self.slip {
                 Slip::FreeSlip => v_b + along_wall(wall, u - v_b),
                 Slip::NoSlip => 2.0 * v_b - u,
                 Slip::WallVelocity => v_b,
@@ -404,25 +403,21 @@ impl Stage for WallPressure {
             if self.mirror {
                 let away = (u - v_b).dot(n);
                 gv[k].0 = v_b - away * n;
-                let v = viscous[k];
-                viscous[k] = v - ((v - v_b).dot(n) + away) * n;
+                visc -= ((visc - v_b).dot(n) + away) * n;
             } else if self.separation {
                 gv[k].0 = v_b + (u - v_b).dot(n).max(0.0) * n;
             }
-            if self.single_velocity {
-                gv[k].0 = viscous[k];
+            match viscous.as_mut() {
+                Some(column) => column[k] = visc,
+                None => gv[k].0 = visc,
             }
             gr[k].0 = eos.density(gp[k].0);
         }
         #[cfg(not(feature = "dim3"))]
-        if !self.single_velocity {
+        if let Some(viscous) = viscous {
             sim.resources
                 .get_or_default::<Columns>()
                 .insert::<NoSlipVelocity>(NoSlipVelocity::SCOPE, viscous)?;
-        }
-        #[cfg(feature = "dim3")]
-        {
-            self.scratch = viscous;
         }
         Ok(())
     }
