@@ -517,9 +517,12 @@ fn median(mut v: Vec<Measurement>) -> Measurement {
     v.swap_remove(v.len() / 2)
 }
 
-/// Stages reported in their own column; the rest are summed as "other".
-const SHOWN: [&str; 7] = [
+/// Stages reported in their own column; the outputs are summed in one, and the rest
+/// (the DFSPH solves, shifting, a plugin's) as "other".
+const SHOWN: [&str; 9] = [
     "ghost_walls",
+    "wall_particles",
+    "wall_pressure",
     "neighbour_grid",
     "reinitialise",
     "continuity",
@@ -660,6 +663,37 @@ mod tests {
         assert!(table.contains("| 1000 | 1 | 0.50 |"), "{table}");
         assert!(table.contains("| 1000 | 2 | - |"), "{table}");
         assert_eq!(isa_ratios(&fixed[..1]), "");
+    }
+
+    /// Each shown stage has its column, the outputs one, and the stages without a
+    /// column (a DFSPH solve here) are summed as "other", so a row adds up to 100.
+    #[test]
+    fn stage_shares_add_up_to_the_step() {
+        let m = Measurement {
+            particles: 1000,
+            threads: 1,
+            isa: "avx2".into(),
+            stages: [
+                ("forces", 5.0),
+                ("wall_pressure", 2.0),
+                ("density_solve", 2.0),
+                ("probe", 1.0),
+            ]
+            .map(|(s, t)| (s.to_string(), t))
+            .to_vec(),
+            ..Default::default()
+        };
+        let table = report::stage_shares([&m].into_iter());
+        let header = table.lines().find(|l| l.contains("| forces |")).unwrap();
+        let row = table.lines().find(|l| l.starts_with("| 1000 |")).unwrap();
+        let cell = |name: &str| {
+            let k = header.split('|').position(|c| c.trim() == name).unwrap();
+            row.split('|').nth(k).unwrap().trim().to_string()
+        };
+        assert_eq!(cell("forces"), "50.0", "{table}");
+        assert_eq!(cell("wall_pressure"), "20.0", "{table}");
+        assert_eq!(cell("probes+outputs"), "10.00", "{table}");
+        assert_eq!(cell("other"), "20.0", "{table}");
     }
 
     #[test]
