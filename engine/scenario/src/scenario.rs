@@ -258,9 +258,14 @@ impl Scenario {
                 name: PISTON_WALL.into(),
                 a,
                 b,
-                // 3D: refused at validation.
+                // 3D: across the tank's breadth, from its z = 0 wall, with the fluid
+                // on the side of (c - a) x (b - a) = +x, as in 2D.
                 #[cfg(feature = "dim3")]
-                c: a,
+                c: a + Vector::new(
+                    0.0,
+                    0.0,
+                    self.spec.tank.as_ref().map_or(0.0, |t| t.breadth.0),
+                ),
                 body: Pose::at_rest(dim::xy(p.x, 0.0)),
             });
         }

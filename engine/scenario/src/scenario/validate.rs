@@ -522,13 +522,6 @@ pub(crate) fn piston(
             .key(&["piston", key])
             .or_else(|| at.doc.key(&["piston"]))
     };
-    if dim::DIM == 3 {
-        return Err(at.error(
-            "piston",
-            place("x"),
-            "the piston is not yet built in 3D; remove it, or run the scene in 2D".into(),
-        ));
-    }
     let Some(tank) = &spec.tank else {
         return Err(at.error(
             "piston",
