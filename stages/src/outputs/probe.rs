@@ -81,9 +81,9 @@ pub struct Params {
     /// of depth]; needs a tank and Forces before Probe. Default false.
     pub roll_moment: bool,
     /// Piston displacement from its rest position [m] (`piston_x`) and the fluid's
-    /// horizontal force on the paddle [N per m of depth] (`piston_force`): Method I
-    /// pressure integrated over the paddle at ds intervals. Needs a `piston`. Default
-    /// false.
+    /// horizontal force on the paddle (`piston_force`; 2D: N per m of depth, 3D: N):
+    /// Method I pressure integrated over the paddle in cells of about ds. Needs a
+    /// `piston`. Default false.
     pub piston: bool,
     /// Draw PNG plots of the series at the end of the run. Default true.
     pub plots: bool,
@@ -214,14 +214,6 @@ impl Stage for Probe {
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         let err = |m: String| SetupError::new("probe", m);
         self.sensors = sph_core::world::cloned::<PressureSensor>(&sim.world);
-        // A face is a segment along the wall in 2D and a disc on a 3D wall; the
-        // piston's force over its area is to come in 3D.
-        #[cfg(feature = "dim3")]
-        if self.params.piston {
-            return Err(err(
-                "`piston: true` (the piston's force) is not yet built in 3D".into(),
-            ));
-        }
         self.filters = self
             .sensors
             .iter()

@@ -110,14 +110,25 @@ pub(super) fn sample(
             .map_err(|_| StepError::Internal("a probed wall is not in the world".into()))?;
         let rest = sim.world.get::<&Wall>(piston).map_or(wall.a.x, |w| w.a.x);
         row.push(wall.a.x - rest);
-        // F = n_x * integral of p along the wetted paddle (midpoint rule, steps of
-        // about ds); dry points interpolate to 0.
-        let steps = (wall.length() / ds).ceil().max(1.0) as usize;
-        let step = wall.length() / steps as f64;
+        // F = n_x * integral of p over the wetted paddle (midpoint rule, cells of
+        // about ds; in 2D along its length, per m of depth, in 3D over its breadth
+        // too, in N); dry points interpolate to 0.
+        let cells = |extent: f64| {
+            let n = (extent / ds).ceil().max(1.0) as usize;
+            (n, extent / n as f64)
+        };
+        let (steps, step) = cells(wall.length());
+        #[cfg(not(feature = "dim3"))]
+        let (rows, width, across) = (1, 1.0, Vector::ZERO);
+        #[cfg(feature = "dim3")]
+        let ((rows, width), across) = (cells(wall.breadth()), wall.tangent_across());
         let mut force = 0.0;
         for i in 0..steps {
-            let at = wall.point((i as f64 + 0.5) * step);
-            force += shepard(sim, particles, at)? * step;
+            let foot = wall.point((i as f64 + 0.5) * step);
+            for k in 0..rows {
+                let at = foot + (k as f64 + 0.5) * width * across;
+                force += shepard(sim, particles, at)? * step * width;
+            }
         }
         row.push(force * -wall.normal().x);
     }
