@@ -669,3 +669,11 @@ fn a_3d_wall_particle_moves_as_the_fluid_s_mirror_image() {
         }
     }
 }
+
+/// A 3D scene's loads are whole, not per metre of a unit depth: the piston's force
+/// plot reads N and the roll moment's N m (`probe_piston_force.png`,
+/// `probe_roll_moment.png`), as their CSV columns are.
+#[test]
+fn the_3d_load_plots_are_in_whole_newtons() {
+    assert_eq!(crate::outputs::probe::PER_DEPTH, "");
+}

@@ -269,6 +269,21 @@ fn spheric_test2_coarse_heights_and_arrival_match_the_measurements() {
     }
 }
 
+/// Runs scenarios/3d/wave_maker.ron on 2 threads with the `--set` overrides `sets`
+/// and the unread outputs off; returns its output folder.
+fn run_flume(tag: &str, sets: &[&str]) -> PathBuf {
+    let out = temp(tag);
+    let o = out.display().to_string();
+    let scene = scenario("3d/wave_maker.ron");
+    let mut args = vec![scene.as_str(), "--out", &o, "-q", "--threads", "2"];
+    for s in sets {
+        args.extend(["--set", s]);
+    }
+    args.extend(QUIET);
+    run(&args);
+    out
+}
+
 /// The piston flume in 3D (scenarios/3d/wave_maker.ron: the 2D flume 0.12 m broad,
 /// d/ds = 12.5, 3 particles across, free-slip side walls) against linear theory over
 /// the last four periods, 6-12 s, with the 2D test's bounds (tests/tests/wave_maker.rs):
@@ -281,12 +296,7 @@ fn spheric_test2_coarse_heights_and_arrival_match_the_measurements() {
 /// make no wave or one of the wrong phase.
 #[test]
 fn a_3d_piston_makes_biesels_wave() {
-    let out = temp("wave-maker");
-    let o = out.display().to_string();
-    let scene = scenario("3d/wave_maker.ron");
-    let mut args = vec![scene.as_str(), "--out", &o, "-q", "--threads", "2"];
-    args.extend(QUIET);
-    run(&args);
+    let out = run_flume("wave-maker", &[]);
     let (d, g, stroke, period) = (0.5, 9.81, 0.05, 1.5);
     let omega = 2.0 * std::f64::consts::PI / period;
     let k = sph_core::piston::wavenumber(omega, d, g);
@@ -324,19 +334,14 @@ fn a_3d_piston_makes_biesels_wave() {
 /// off by the number of cells across or by 1/ds.
 #[test]
 fn a_3d_paddle_at_rest_feels_the_hydrostatic_force() {
-    let out = temp("paddle-rest");
-    let o = out.display().to_string();
-    let scene = scenario("3d/wave_maker.ron");
-    let mut args = vec![scene.as_str(), "--out", &o, "-q", "--threads", "2"];
-    for s in [
-        "piston.stroke=0.0",
-        "end_time=0.01",
-        "resolution=Spacing(0.02)",
-    ] {
-        args.extend(["--set", s]);
-    }
-    args.extend(QUIET);
-    run(&args);
+    let out = run_flume(
+        "paddle-rest",
+        &[
+            "piston.stroke=0.0",
+            "end_time=0.01",
+            "resolution=Spacing(0.02)",
+        ],
+    );
     let force = read_series(&out.join("probes.csv"), "piston_force").unwrap();
     let expected = -1000.0 * 9.81 * 0.5 * 0.5 / 2.0 * 0.12;
     let first = force[0].1;

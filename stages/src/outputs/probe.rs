@@ -106,6 +106,10 @@ impl Default for Params {
     }
 }
 
+/// The unit suffix of an integrated load: a 2D scene has a unit depth, so its forces
+/// and moments are per metre of it; a 3D scene's are whole.
+pub(crate) const PER_DEPTH: &str = if sph_core::dim::DIM == 2 { " / m" } else { "" };
+
 /// Reads [`Params`], `methods` through the registry's extraction methods; returns the
 /// methods' factories beside them, in list order.
 fn read_params(
@@ -444,7 +448,7 @@ impl Stage for Probe {
             out.plot(
                 &dir.join("probe_roll_moment.png"),
                 &title("liquid roll moment about the pivot"),
-                "moment [N m / m]",
+                &format!("moment [N m{PER_DEPTH}]"),
                 &["roll_moment"],
             )?;
         }
@@ -458,7 +462,7 @@ impl Stage for Probe {
             out.plot(
                 &dir.join("probe_piston_force.png"),
                 &title("force on the piston"),
-                "force [N / m]",
+                &format!("force [N{PER_DEPTH}]"),
                 &["piston_force"],
             )?;
         }
@@ -1141,5 +1145,12 @@ pub(super) mod tests {
             let e = crate::testing::built("probe", &format!("{{\"interval\": {bad}}}")).err();
             assert!(e.is_some_and(|e| e.contains("interval")), "{bad}");
         }
+    }
+
+    /// A 2D scene has a unit depth: its load plots read per metre of it, as the
+    /// columns (docs/scenario.md, `Probe`).
+    #[test]
+    fn the_2d_load_plots_are_per_metre_of_depth() {
+        assert_eq!(super::PER_DEPTH, " / m");
     }
 }
