@@ -24,10 +24,11 @@ pub(crate) use walls::wall_work;
 pub use walls::{wall_particles, wall_pressure};
 
 pub mod equations;
-pub(crate) use equations::rates;
-pub use equations::{continuity, damping_zone, eos, forces, reinitialise};
 #[cfg(not(feature = "dim3"))]
-pub use equations::{density_gradient, shifting};
+pub use equations::density_gradient;
+pub(crate) use equations::rates;
+pub use equations::shifting;
+pub use equations::{continuity, damping_zone, eos, forces, reinitialise};
 
 pub mod solvers;
 pub(crate) use solvers::pressure_solve;
@@ -61,8 +62,6 @@ pub fn register_standard(registry: &mut StageRegistry) {
     snapshots::register(registry);
     wall_particles::register(registry);
     wall_pressure::register(registry);
-    // Not yet built in 3D (docs/architecture.md, "Two and three dimensions").
-    #[cfg(not(feature = "dim3"))]
     shifting::register(registry);
 }
 

@@ -10,6 +10,4 @@ pub mod eos;
 pub mod forces;
 pub(crate) mod rates;
 pub mod reinitialise;
-// Not yet built in 3D (docs/architecture.md, "Two and three dimensions").
-#[cfg(not(feature = "dim3"))]
 pub mod shifting;

@@ -12,7 +12,8 @@
 //!
 //! Free surface (Marrone et al. 2010): a particle whose divergence of position
 //!   div r_i = sum_j V_j (x_j - x_i) . grad_i W_ij
-//! (2 inside the fluid in 2D, about 1 on a flat surface) is below `surface_threshold`
+//! (2 inside the fluid in 2D and 3 in 3D, about half that on a flat surface) is below
+//! `surface_threshold`
 //! is a surface particle and is not shifted; every other fluid particle with a surface
 //! particle in its neighbour list (its kernel is still cut by the surface) keeps only
 //! the tangential part of its shift, delta r - (delta r . n) n, with the normal of
@@ -39,11 +40,11 @@
 //! the number of threads.
 
 use crate::vocab::ShiftsCapped;
-use glam::DVec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::components::{Density, Fluid, Ghost, Mass, Position};
 use sph_core::contract::Access;
+use sph_core::dim::{Vector, DIM};
 use sph_core::kernel::Kernel;
 use sph_core::pair::{with_records, Field, Fields, Lane, Layouts, Me, Pair, PairTerm, Pass};
 use sph_core::sim::Counter;
@@ -75,8 +76,9 @@ pub struct Params {
     /// not shifted, their neighbours only along the surface. `false` shifts
     /// every particle fully: only for a fluid without a free surface. Default true.
     pub free_surface: bool,
-    /// A particle with div r below this is on the free surface (2 inside the fluid in
-    /// 2D, about 1 on a flat surface). Default 1.5.
+    /// A particle with div r below this is on the free surface (DIM inside the fluid,
+    /// about half of it on a flat surface). Default 1.5 in 2D, 2.25 in 3D: three
+    /// quarters of the inside's value.
     pub surface_threshold: f64,
 }
 
@@ -87,7 +89,7 @@ impl Default for Params {
             anti_clump: 0.0,
             max_shift: 0.2,
             free_surface: true,
-            surface_threshold: 1.5,
+            surface_threshold: 0.75 * DIM as f64,
         }
     }
 }
@@ -119,11 +121,15 @@ pub fn register(registry: &mut StageRegistry) {
                     "a fraction of ds with 0 < f <= 0.5 (0.2 usual)",
                 ));
             }
-            if !(p.surface_threshold > 0.0 && p.surface_threshold < 2.0) {
+            if !(p.surface_threshold > 0.0 && p.surface_threshold < DIM as f64) {
                 return Err(out(
                     "surface_threshold",
                     p.surface_threshold,
-                    "0 < t < 2 (div r is 2 inside the fluid in 2D; 1.5 usual)",
+                    if DIM == 2 {
+                        "0 < t < 2 (div r is 2 inside the fluid in 2D; 1.5 usual)"
+                    } else {
+                        "0 < t < 3 (div r is 3 inside the fluid in 3D; 2.25 usual)"
+                    },
                 ));
             }
             Ok(Shifting {
@@ -140,15 +146,15 @@ pub fn register(registry: &mut StageRegistry) {
 #[derive(Clone, Copy, Default)]
 pub struct Sums {
     /// grad C_i with the anti-clumping term [1/m].
-    pub grad_c: DVec2,
+    pub grad_c: Vector,
     /// The surface normal of Marrone et al. (2010) (unit, outward; zero if undefined).
-    pub normal: DVec2,
+    pub normal: Vector,
     /// div r_i.
     pub div_r: f64,
 }
 
 /// The pair term: sum_j V_j [1 + R (W/W(ds))^4] grad W, sum_j V_j grad W, the matrix
-/// sum_j V_j x_ji (x) grad W (symmetric) and its trace div r.
+/// sum_j V_j x_ji (x) grad W (symmetric: grad W is along x_ij) and its trace div r.
 #[derive(Clone)]
 pub struct Concentration {
     /// R.
@@ -160,20 +166,24 @@ pub struct Concentration {
 /// Below this determinant (1 inside the fluid) the matrix is not inverted.
 const SINGULAR: f64 = 1e-3;
 
+/// The accumulator's length: two vectors and the symmetric matrix's upper triangle.
+const ACC: usize = 2 * DIM + DIM * (DIM + 1) / 2;
+
 impl PairTerm for Concentration {
     // Packed with (x, y, rho, m) by its stage.
     const LAYOUTS: Layouts = Layouts::FILTER;
-    type Acc<L: Lane> = [L; 7];
+    type Acc<L: Lane> = [L; ACC];
     type Out = Sums;
     fn reads(&self) -> Fields {
         Fields::of(&[Field::Rho])
     }
     #[inline(always)]
-    fn zero<L: Lane>(&self) -> [L; 7] {
-        [L::zero(); 7]
+    fn zero<L: Lane>(&self) -> [L; ACC] {
+        [L::zero(); ACC]
     }
+    #[cfg(not(feature = "dim3"))]
     #[inline(always)]
-    fn pair<L: Lane>(&self, _: &Me, p: &Pair<L>, acc: &mut [L; 7]) {
+    fn pair<L: Lane>(&self, _: &Me, p: &Pair<L>, acc: &mut [L; ACC]) {
         let c = L::splat;
         // Zero in the padding lanes (zero mass).
         let v = p.j(Field::Mass) / p.j(Field::Rho);
@@ -190,19 +200,66 @@ impl PairTerm for Concentration {
         acc[5] = acc[5] - p.dx * vy;
         acc[6] = acc[6] - p.dy * vy;
     }
-    fn finish<L: Lane>(&self, _: &Me, acc: [L; 7]) -> Sums {
+    /// As in 2D, with z: [f V grad W; V grad W; the matrix's xx, xy, xz, yy, yz, zz].
+    #[cfg(feature = "dim3")]
+    #[inline(always)]
+    fn pair<L: Lane>(&self, _: &Me, p: &Pair<L>, acc: &mut [L; ACC]) {
+        let c = L::splat;
+        // Zero in the padding lanes (zero mass).
+        let v = p.j(Field::Mass) / p.j(Field::Rho);
+        let g = [v * p.gx, v * p.gy, v * p.gz];
+        let w = p.w * c(self.inv_w_ds);
+        let w2 = w * w;
+        let f = c(1.0) + c(self.anti_clump) * w2 * w2;
+        for k in 0..3 {
+            acc[k] = acc[k] + f * g[k];
+            acc[3 + k] = acc[3 + k] + g[k];
+        }
+        // x_ji = -(dx, dy, dz).
+        let d = [p.dx, p.dy, p.dz];
+        let mut m = 6;
+        for (a, &da) in d.iter().enumerate() {
+            for &gb in &g[a..] {
+                acc[m] = acc[m] - da * gb;
+                m += 1;
+            }
+        }
+    }
+    #[cfg(not(feature = "dim3"))]
+    fn finish<L: Lane>(&self, _: &Me, acc: [L; ACC]) -> Sums {
         let [gx, gy, px, py, a, b, d] = acc.map(L::sum);
         let det = a * d - b * b;
-        let plain = DVec2::new(px, py);
+        let plain = Vector::new(px, py);
         let renormalised = if det.abs() < SINGULAR || !det.is_finite() {
             plain
         } else {
-            DVec2::new(d * px - b * py, a * py - b * px) / det
+            Vector::new(d * px - b * py, a * py - b * px) / det
         };
         Sums {
-            grad_c: DVec2::new(gx, gy),
+            grad_c: Vector::new(gx, gy),
             normal: (-renormalised).normalize_or_zero(),
             div_r: a + d,
+        }
+    }
+    #[cfg(feature = "dim3")]
+    fn finish<L: Lane>(&self, _: &Me, acc: [L; ACC]) -> Sums {
+        let [gx, gy, gz, px, py, pz, xx, xy, xz, yy, yz, zz] = acc.map(L::sum);
+        let m = glam::DMat3::from_cols(
+            Vector::new(xx, xy, xz),
+            Vector::new(xy, yy, yz),
+            Vector::new(xz, yz, zz),
+        );
+        let det = m.determinant();
+        let plain = Vector::new(px, py, pz);
+        let renormalised = if det.abs() < SINGULAR || !det.is_finite() {
+            plain
+        } else {
+            m.inverse() * plain
+        };
+        Sums {
+            grad_c: Vector::new(gx, gy, gz),
+            normal: (-renormalised).normalize_or_zero(),
+            div_r: xx + yy + zz,
         }
     }
 }
@@ -212,7 +269,7 @@ pub struct Shifting {
     /// Reused buffers: the sums, the surface flags and the shifts of the fluid.
     sums: Vec<Sums>,
     surface: Vec<bool>,
-    shifts: Vec<DVec2>,
+    shifts: Vec<Vector>,
 }
 
 impl Shifting {
@@ -269,7 +326,7 @@ impl Shifting {
         let d = p.coefficient * c.h * c.h;
         let cap = p.max_shift * c.spacing;
         let (sums, surface) = (&self.sums, &self.surface);
-        self.shifts.resize(n, DVec2::ZERO);
+        self.shifts.resize(n, Vector::ZERO);
         let capped = self
             .shifts
             .par_iter_mut()
@@ -280,7 +337,7 @@ impl Shifting {
                 // A surface particle stays; one whose kernel the surface cuts moves
                 // only along the surface.
                 if surface[i] {
-                    dr = DVec2::ZERO;
+                    dr = Vector::ZERO;
                 } else if nb.of(i).iter().any(|&j| {
                     let j = j as usize;
                     j < n && surface[j] && x[i].0.distance_squared(x[j].0) < support2
@@ -292,7 +349,7 @@ impl Shifting {
                 if over {
                     dr *= cap / len;
                 }
-                *shift = if dr.is_finite() { dr } else { DVec2::ZERO };
+                *shift = if dr.is_finite() { dr } else { Vector::ZERO };
                 over as usize
             })
             .sum();
