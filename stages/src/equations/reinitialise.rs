@@ -100,14 +100,6 @@ impl Stage for Reinitialise {
     }
 
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
-        // The MLS filter's linear fit is written for (1, x, y).
-        #[cfg(feature = "dim3")]
-        if self.filter == Filter::Mls {
-            return Err(SetupError::new(
-                "reinitialise",
-                "`filter: Mls` is not yet built in 3D: use `filter: Shepard` or `FreeSurface`",
-            ));
-        }
         let c = &sim.constants;
         self.inv_lattice_sum = 1.0 / sph_core::kernel::lattice_sum(c.kernel, c.h, c.spacing);
         if self.sums == Sums::Forces {

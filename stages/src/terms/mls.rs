@@ -4,42 +4,57 @@
 //!   rho_i = sum_j m_j W^MLS_ij,   W^MLS_ij = (b_0 + b_1 (x_i - x_j) + b_2 (y_i - y_j)) W_ij,
 //!   (b_0, b_1, b_2) = A^-1 (1, 0, 0),   A = sum_j W_ij V_j [1 d^T; d d d^T],  d = x_i - x_j,
 //!
-//! with V_j = m_j / rho_j and j over the neighbours and i itself. It reproduces a linear
-//! density field exactly, so unlike the Shepard filter it does not raise the density of
-//! free-surface particles towards the denser water below them (a Shepard filter every
-//! step lifts a still free surface; see docs/validation.md). Where the neighbourhood is
-//! too one-sided or too sparse for A to be well conditioned (lone spray particles), the
-//! Shepard value is used instead.
+//! with V_j = m_j / rho_j and j over the neighbours and i itself (in 3D with the z term:
+//! A is 4 x 4 and its first column of the inverse comes from glam's `DMat4`). It
+//! reproduces a linear density field exactly, so unlike the Shepard filter it does not
+//! raise the density of free-surface particles towards the denser water below them (a
+//! Shepard filter every step lifts a still free surface; see docs/validation.md). Where
+//! the neighbourhood is too one-sided or too sparse for A to be well conditioned (lone
+//! spray particles), the Shepard value is used instead.
 
-use glam::DVec2;
+use sph_core::dim::{Vector, DIM};
 use sph_core::pair::{Field, Fields, Lane, Layouts, Me, Pair, PairTerm};
 
-/// Smallest accepted det(A) / (A_00 A_11 A_22): below it A is near singular.
+/// Smallest accepted det(A) / (A_00 A_11 ... A_DD): below it A is near singular.
 const MIN_CONDITION: f64 = 1e-3;
+
+/// The entries of A's upper triangle: A is (DIM + 1) x (DIM + 1).
+const N_A: usize = (DIM + 1) * (DIM + 2) / 2;
 
 /// Running sums for one particle's filtered density.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct MlsSums {
-    /// Upper triangle of A: a00 (= sum V W, the Shepard denominator), a01, a02,
-    /// a11, a12, a22.
-    a: [f64; 6],
+    /// Upper triangle of A, row by row: a00 (= sum V W, the Shepard denominator), a01,
+    /// a02, (a03,) a11, a12, (a13,) a22 (, a23, a33).
+    a: [f64; N_A],
     /// Mass moments sum m W (the Shepard numerator) and sum m W d, which give
     /// sum m W^MLS once A is known.
     m0: f64,
-    m1: DVec2,
+    m1: Vector,
+}
+
+/// (1, d): the basis of the linear fit at offset d.
+#[inline(always)]
+fn basis(d: Vector) -> [f64; DIM + 1] {
+    let mut e = [1.0; DIM + 1];
+    e[1..].copy_from_slice(&d.to_array());
+    e
 }
 
 impl MlsSums {
     /// Adds neighbour j (or i itself with d = 0): d = x_i - x_j, kernel value w.
     #[inline(always)]
-    pub fn add(&mut self, d: DVec2, w: f64, m: f64, rho: f64) {
+    pub fn add(&mut self, d: Vector, w: f64, m: f64, rho: f64) {
         let vw = m / rho * w;
-        self.a[0] += vw;
-        self.a[1] += vw * d.x;
-        self.a[2] += vw * d.y;
-        self.a[3] += vw * d.x * d.x;
-        self.a[4] += vw * d.x * d.y;
-        self.a[5] += vw * d.y * d.y;
+        let e = basis(d);
+        let mut k = 0;
+        for r in 0..=DIM {
+            for c in r..=DIM {
+                // vw e_r e_c: multiplying by the basis' 1 is exact.
+                self.a[k] += vw * e[r] * e[c];
+                k += 1;
+            }
+        }
         self.m0 += m * w;
         self.m1 += m * w * d;
     }
@@ -50,6 +65,7 @@ impl MlsSums {
     }
 
     /// The MLS density, or the Shepard one where A is ill conditioned.
+    #[cfg(not(feature = "dim3"))]
     pub fn mls(&self) -> f64 {
         let [a00, a01, a02, a11, a12, a22] = self.a;
         // First column of A^-1 by cofactors (A symmetric).
@@ -61,9 +77,27 @@ impl MlsSums {
         if scale.is_nan() || scale <= 0.0 || det / scale < MIN_CONDITION {
             return self.shepard();
         }
-        let b = DVec2::new(c01, c02) / det;
+        let b = Vector::new(c01, c02) / det;
         // sum_j m_j (b0 + b . d) W = b0 sum m W + b . sum m W d
         c00 / det * self.m0 + b.dot(self.m1)
+    }
+
+    /// The MLS density, or the Shepard one where A is ill conditioned.
+    #[cfg(feature = "dim3")]
+    pub fn mls(&self) -> f64 {
+        let [a00, a01, a02, a03, a11, a12, a13, a22, a23, a33] = self.a;
+        let a = glam::DMat4::from_cols_array(&[
+            a00, a01, a02, a03, a01, a11, a12, a13, a02, a12, a22, a23, a03, a13, a23, a33,
+        ]);
+        let det = a.determinant();
+        let scale = a00 * a11 * a22 * a33;
+        if scale.is_nan() || scale <= 0.0 || det / scale < MIN_CONDITION {
+            return self.shepard();
+        }
+        // (b_0, b) = A^-1 (1, 0, 0, 0): A^-1's first column.
+        let b = a.inverse().x_axis;
+        // sum_j m_j (b0 + b . d) W = b0 sum m W + b . sum m W d
+        b.x * self.m0 + Vector::new(b.y, b.z, b.w).dot(self.m1)
     }
 }
 
@@ -73,20 +107,24 @@ pub struct Mls {
     pub w0: f64,
 }
 
+/// The lanes' sums: A's upper triangle, sum m W, sum m W d.
+const N_ACC: usize = N_A + 1 + DIM;
+
 impl PairTerm for Mls {
     // Packed with (x, y, rho, m) by its stage.
     const LAYOUTS: Layouts = Layouts::FILTER;
     /// The sums of [`MlsSums`] in lanes: A's upper triangle, sum m W, sum m W d.
-    type Acc<L: Lane> = [L; 9];
+    type Acc<L: Lane> = [L; N_ACC];
     type Out = f64;
     fn reads(&self) -> Fields {
         Fields::of(&[Field::Rho])
     }
-    fn zero<L: Lane>(&self) -> [L; 9] {
-        [L::zero(); 9]
+    fn zero<L: Lane>(&self) -> [L; N_ACC] {
+        [L::zero(); N_ACC]
     }
+    #[cfg(not(feature = "dim3"))]
     #[inline(always)]
-    fn pair<L: Lane>(&self, _: &Me, p: &Pair<L>, s: &mut [L; 9]) {
+    fn pair<L: Lane>(&self, _: &Me, p: &Pair<L>, s: &mut [L; N_ACC]) {
         let (m, w, dx, dy) = (p.j(Field::Mass), p.w, p.dx, p.dy);
         let vw = m / p.j(Field::Rho) * w;
         let mw = m * w;
@@ -105,16 +143,44 @@ impl PairTerm for Mls {
             *s = *s + t;
         }
     }
+    /// As in 2D, with z: A's upper triangle over (1, dx, dy, dz), then m W (1, d).
+    #[cfg(feature = "dim3")]
     #[inline(always)]
-    fn finish<L: Lane>(&self, me: &Me, s: [L; 9]) -> f64 {
+    fn pair<L: Lane>(&self, _: &Me, p: &Pair<L>, s: &mut [L; N_ACC]) {
+        let (m, w) = (p.j(Field::Mass), p.w);
+        let vw = m / p.j(Field::Rho) * w;
+        let mw = m * w;
+        let d = [p.dx, p.dy, p.dz];
+        // Row 0 of A: vw (1, d).
+        s[0] = s[0] + vw;
+        for (k, &dk) in d.iter().enumerate() {
+            s[1 + k] = s[1 + k] + vw * dk;
+        }
+        // Rows 1-3: vw d_r d_c, c >= r.
+        let mut k = 4;
+        for (r, &dr) in d.iter().enumerate() {
+            for &dc in &d[r..] {
+                s[k] = s[k] + vw * dr * dc;
+                k += 1;
+            }
+        }
+        s[N_A] = s[N_A] + mw;
+        for (k, &dk) in d.iter().enumerate() {
+            s[N_A + 1 + k] = s[N_A + 1 + k] + mw * dk;
+        }
+    }
+    #[inline(always)]
+    fn finish<L: Lane>(&self, me: &Me, s: [L; N_ACC]) -> f64 {
         let s = s.map(L::sum);
+        let mut a = [0.0; N_A];
+        a.copy_from_slice(&s[..N_A]);
         let mut sums = MlsSums {
-            a: [s[0], s[1], s[2], s[3], s[4], s[5]],
-            m0: s[6],
-            m1: DVec2::new(s[7], s[8]),
+            a,
+            m0: s[N_A],
+            m1: Vector::from_slice(&s[N_A + 1..]),
         };
         sums.add(
-            DVec2::ZERO,
+            Vector::ZERO,
             self.w0,
             me.get(Field::Mass),
             me.get(Field::Rho),
@@ -123,9 +189,10 @@ impl PairTerm for Mls {
     }
 }
 
-#[cfg(test)]
+#[cfg(all(test, not(feature = "dim3")))]
 mod tests {
     use super::*;
+    use glam::DVec2;
     use sph_core::kernel::{Kernel, Wendland};
 
     /// A jittered lattice patch around the origin with a linear density field, cut
