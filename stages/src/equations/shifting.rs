@@ -181,43 +181,28 @@ impl PairTerm for Concentration {
     fn zero<L: Lane>(&self) -> [L; ACC] {
         [L::zero(); ACC]
     }
-    #[cfg(not(feature = "dim3"))]
+    /// [f V grad W; V grad W; the matrix's upper triangle, row by row (xx, xy, yy in
+    /// 2D; xx, xy, xz, yy, yz, zz in 3D)].
     #[inline(always)]
     fn pair<L: Lane>(&self, _: &Me, p: &Pair<L>, acc: &mut [L; ACC]) {
         let c = L::splat;
         // Zero in the padding lanes (zero mass).
         let v = p.j(Field::Mass) / p.j(Field::Rho);
-        let (vx, vy) = (v * p.gx, v * p.gy);
-        let w = p.w * c(self.inv_w_ds);
-        let w2 = w * w;
-        let f = c(1.0) + c(self.anti_clump) * w2 * w2;
-        acc[0] = acc[0] + f * vx;
-        acc[1] = acc[1] + f * vy;
-        acc[2] = acc[2] + vx;
-        acc[3] = acc[3] + vy;
-        // x_ji = -(dx, dy).
-        acc[4] = acc[4] - p.dx * vx;
-        acc[5] = acc[5] - p.dx * vy;
-        acc[6] = acc[6] - p.dy * vy;
-    }
-    /// As in 2D, with z: [f V grad W; V grad W; the matrix's xx, xy, xz, yy, yz, zz].
-    #[cfg(feature = "dim3")]
-    #[inline(always)]
-    fn pair<L: Lane>(&self, _: &Me, p: &Pair<L>, acc: &mut [L; ACC]) {
-        let c = L::splat;
-        // Zero in the padding lanes (zero mass).
-        let v = p.j(Field::Mass) / p.j(Field::Rho);
-        let g = [v * p.gx, v * p.gy, v * p.gz];
-        let w = p.w * c(self.inv_w_ds);
-        let w2 = w * w;
-        let f = c(1.0) + c(self.anti_clump) * w2 * w2;
-        for k in 0..3 {
-            acc[k] = acc[k] + f * g[k];
-            acc[3 + k] = acc[3 + k] + g[k];
+        // V grad W, written as a loop: `array::map` is not inlined in the pair loop.
+        let mut g = p.grad();
+        for gk in &mut g {
+            *gk = v * *gk;
         }
-        // x_ji = -(dx, dy, dz).
-        let d = [p.dx, p.dy, p.dz];
-        let mut m = 6;
+        let w = p.w * c(self.inv_w_ds);
+        let w2 = w * w;
+        let f = c(1.0) + c(self.anti_clump) * w2 * w2;
+        for k in 0..DIM {
+            acc[k] = acc[k] + f * g[k];
+            acc[DIM + k] = acc[DIM + k] + g[k];
+        }
+        // x_ji = -x_ij.
+        let d = p.x_ij();
+        let mut m = 2 * DIM;
         for (a, &da) in d.iter().enumerate() {
             for &gb in &g[a..] {
                 acc[m] = acc[m] - da * gb;

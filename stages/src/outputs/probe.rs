@@ -77,8 +77,8 @@ pub struct Params {
     pub max_speed: bool,
     /// Minimum, mean and maximum neighbour count. Default false.
     pub neighbours: bool,
-    /// Roll angle [deg] and the liquid's roll moment about the tank pivot [N m per m
-    /// of depth]; needs a tank and Forces before Probe. Default false.
+    /// Roll angle [deg] and the liquid's roll moment about the tank pivot (2D: N m per
+    /// m of depth, 3D: N m); needs a tank and Forces before Probe. Default false.
     pub roll_moment: bool,
     /// Piston displacement from its rest position [m] (`piston_x`) and the fluid's
     /// horizontal force on the paddle (`piston_force`; 2D: N per m of depth, 3D: N):

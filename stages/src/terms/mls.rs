@@ -86,18 +86,25 @@ impl MlsSums {
     #[cfg(feature = "dim3")]
     pub fn mls(&self) -> f64 {
         let [a00, a01, a02, a03, a11, a12, a13, a22, a23, a33] = self.a;
-        let a = glam::DMat4::from_cols_array(&[
-            a00, a01, a02, a03, a01, a11, a12, a13, a02, a12, a22, a23, a03, a13, a23, a33,
-        ]);
-        let det = a.determinant();
+        let det3 = |c0: [f64; 3], c1: [f64; 3], c2: [f64; 3]| {
+            glam::DMat3::from_cols_array_2d(&[c0, c1, c2]).determinant()
+        };
+        // First row of A^-1 (= its first column, A symmetric) by cofactors: row 0's
+        // minors are rows 1-3 with one column left out; k_j is column j of those rows.
+        let (k0, k1) = ([a01, a02, a03], [a11, a12, a13]);
+        let (k2, k3) = ([a12, a22, a23], [a13, a23, a33]);
+        let c0 = det3(k1, k2, k3);
+        let c1 = -det3(k0, k2, k3);
+        let c2 = det3(k0, k1, k3);
+        let c3 = -det3(k0, k1, k2);
+        let det = a00 * c0 + a01 * c1 + a02 * c2 + a03 * c3;
         let scale = a00 * a11 * a22 * a33;
         if scale.is_nan() || scale <= 0.0 || det / scale < MIN_CONDITION {
             return self.shepard();
         }
-        // (b_0, b) = A^-1 (1, 0, 0, 0): A^-1's first column.
-        let b = a.inverse().x_axis;
+        let b = Vector::new(c1, c2, c3) / det;
         // sum_j m_j (b0 + b . d) W = b0 sum m W + b . sum m W d
-        b.x * self.m0 + Vector::new(b.y, b.z, b.w).dot(self.m1)
+        c0 / det * self.m0 + b.dot(self.m1)
     }
 }
 
@@ -122,42 +129,20 @@ impl PairTerm for Mls {
     fn zero<L: Lane>(&self) -> [L; N_ACC] {
         [L::zero(); N_ACC]
     }
-    #[cfg(not(feature = "dim3"))]
-    #[inline(always)]
-    fn pair<L: Lane>(&self, _: &Me, p: &Pair<L>, s: &mut [L; N_ACC]) {
-        let (m, w, dx, dy) = (p.j(Field::Mass), p.w, p.dx, p.dy);
-        let vw = m / p.j(Field::Rho) * w;
-        let mw = m * w;
-        let terms = [
-            vw,
-            vw * dx,
-            vw * dy,
-            vw * dx * dx,
-            vw * dx * dy,
-            vw * dy * dy,
-            mw,
-            mw * dx,
-            mw * dy,
-        ];
-        for (s, t) in s.iter_mut().zip(terms) {
-            *s = *s + t;
-        }
-    }
-    /// As in 2D, with z: A's upper triangle over (1, dx, dy, dz), then m W (1, d).
-    #[cfg(feature = "dim3")]
+    /// A's upper triangle over the basis (1, d), row by row, then m W (1, d).
     #[inline(always)]
     fn pair<L: Lane>(&self, _: &Me, p: &Pair<L>, s: &mut [L; N_ACC]) {
         let (m, w) = (p.j(Field::Mass), p.w);
         let vw = m / p.j(Field::Rho) * w;
         let mw = m * w;
-        let d = [p.dx, p.dy, p.dz];
+        let d = p.x_ij();
         // Row 0 of A: vw (1, d).
         s[0] = s[0] + vw;
         for (k, &dk) in d.iter().enumerate() {
             s[1 + k] = s[1 + k] + vw * dk;
         }
-        // Rows 1-3: vw d_r d_c, c >= r.
-        let mut k = 4;
+        // The other rows: vw d_r d_c, c >= r.
+        let mut k = 1 + DIM;
         for (r, &dr) in d.iter().enumerate() {
             for &dc in &d[r..] {
                 s[k] = s[k] + vw * dr * dc;
