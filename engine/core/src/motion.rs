@@ -1,10 +1,12 @@
 //! Prescribed rigid-body motion of the tank: a constant tilt plus harmonic roll about a
-//! pivot, with optional sway and heave, all brought in by a smooth start; or a measured
-//! time series (time, angle[, x, y]) read from CSV.
+//! pivot, with optional sway and heave, and in 3D a harmonic pitch, all brought in by a
+//! smooth start; or a measured time series (time, angle[, x, y]) read from CSV.
 //!
 //! The tank frame is the frame the scenario's geometry is written in. A point q of the
 //! tank is at x = P + (s, hv) + R(theta) (q - P) in the world, P the pivot, (s, hv) the
-//! sway and heave, theta the roll angle (counter-clockwise positive).
+//! sway and heave, theta the roll angle (counter-clockwise positive). In 3D the roll
+//! turns about the z axis through P and the pitch phi then turns the rolled tank about
+//! the x axis through P: x = P + (s, hv, 0) + R_x(phi) R_z(theta) (q - P).
 
 use crate::dim::{self, Vector};
 use crate::units::Positive;
@@ -41,11 +43,17 @@ pub struct MotionSpec {
     pub tilt: f64,
     /// Roll theta(t) = amplitude [deg] sin(2 pi t / period + phase).
     pub roll: Option<HarmonicSpec>,
+    /// Pitch phi(t) = amplitude [deg] sin(2 pi t / period + phase) about the x axis
+    /// through the pivot, after the roll (3D only: a 2D scene has no x axis to turn
+    /// about). Positive turns +y towards +z. Left out of a resolved scenario when
+    /// absent, so that 2D files read as before.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pitch: Option<HarmonicSpec>,
     /// Horizontal displacement of the pivot [m].
     pub sway: Option<HarmonicSpec>,
     /// Vertical displacement of the pivot [m].
     pub heave: Option<HarmonicSpec>,
-    /// Smooth start [s]: tilt, roll, sway and heave are multiplied by
+    /// Smooth start [s]: tilt, roll, pitch, sway and heave are multiplied by
     /// r(t) = (1 - cos(pi t / ramp)) / 2 until t = ramp. Default: the longest period
     /// given (0, a sudden start, when there is none).
     pub ramp: Option<f64>,
@@ -69,6 +77,9 @@ pub struct RigidState {
     pub offset: Vector,
     pub velocity: Vector,
     pub acceleration: Vector,
+    /// Pitch phi [rad], its rate [rad/s] and acceleration [rad/s^2] (3D).
+    #[cfg(feature = "dim3")]
+    pub pitch: [f64; 3],
 }
 
 /// Where the tank frame is: maps tank-frame points to the world and back, and gives the
@@ -76,7 +87,7 @@ pub struct RigidState {
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Pose {
     /// The pivot in the tank frame (and in the world at rest); in 3D the roll axis is
-    /// the line through it along z.
+    /// the line through it along z, the pitch axis the line through it along x.
     pub pivot: Vector,
     pub state: RigidState,
 }
@@ -88,13 +99,27 @@ pub struct Placement {
     pivot: Vector,
     /// (cos, sin) of the angle.
     rotation: DVec2,
+    /// (cos, sin) of the pitch (3D).
+    #[cfg(feature = "dim3")]
+    pitch: DVec2,
 }
 
 impl Placement {
     /// A tank-frame point in the world.
     pub fn to_world(&self, q: Vector) -> Vector {
-        self.centre + dim::rotate_z(self.rotation, q - self.pivot)
+        let rolled = dim::rotate_z(self.rotation, q - self.pivot);
+        #[cfg(feature = "dim3")]
+        let rolled = rotate_x(self.pitch, rolled);
+        self.centre + rolled
     }
+}
+
+/// `v` turned about the x axis by the angle whose (cos, sin) is `rotation` (+y towards
+/// +z): the pitch.
+#[cfg(feature = "dim3")]
+fn rotate_x(rotation: DVec2, v: Vector) -> Vector {
+    let (c, s) = (rotation.x, rotation.y);
+    Vector::new(v.x, c * v.y - s * v.z, s * v.y + c * v.z)
 }
 
 impl Pose {
@@ -119,22 +144,54 @@ impl Pose {
             centre: self.centre(),
             pivot: self.pivot,
             rotation: DVec2::from_angle(self.state.angle),
+            #[cfg(feature = "dim3")]
+            pitch: DVec2::from_angle(self.state.pitch[0]),
         }
     }
     /// A world point in the tank frame.
     pub fn to_body(&self, x: Vector) -> Vector {
-        self.pivot + dim::rotate_z(DVec2::from_angle(-self.state.angle), x - self.centre())
+        let r = x - self.centre();
+        #[cfg(feature = "dim3")]
+        let r = rotate_x(DVec2::from_angle(-self.state.pitch[0]), r);
+        self.pivot + dim::rotate_z(DVec2::from_angle(-self.state.angle), r)
     }
     /// Velocity of the tank at world point x: V + omega k x r.
     pub fn velocity_at(&self, x: Vector) -> Vector {
+        #[cfg(feature = "dim3")]
+        if let Some((omega, _)) = self.spin() {
+            return self.state.velocity + omega.cross(x - self.centre());
+        }
         self.state.velocity + self.state.omega * dim::z_cross(x - self.centre())
     }
     /// Acceleration of the tank at world point x: A + alpha k x r - omega^2 r, r's part
     /// in the x-y plane (the distance from the z axis through the pivot).
     pub fn acceleration_at(&self, x: Vector) -> Vector {
         let r = x - self.centre();
+        #[cfg(feature = "dim3")]
+        if let Some((omega, alpha)) = self.spin() {
+            return self.state.acceleration + alpha.cross(r) + omega.cross(omega.cross(r));
+        }
         self.state.acceleration + self.state.alpha * dim::z_cross(r)
             - self.state.omega.powi(2) * dim::in_xy(r)
+    }
+    /// A pitching tank's angular velocity and acceleration, world vectors; `None`
+    /// without pitch, where the roll's formulas above are these with omega along z.
+    /// The roll turns about the pitched z axis k = R_x(phi) z, so with e_x the pitch
+    /// axis: omega = phi' e_x + theta' k, alpha = phi'' e_x + theta'' k + theta' phi'
+    /// (e_x x k).
+    #[cfg(feature = "dim3")]
+    fn spin(&self) -> Option<(Vector, Vector)> {
+        let [phi, rate, accel] = self.state.pitch;
+        if (phi, rate, accel) == (0.0, 0.0, 0.0) {
+            return None;
+        }
+        let (s, c) = phi.sin_cos();
+        let k = Vector::new(0.0, -s, c);
+        let e_x = Vector::X;
+        let st = &self.state;
+        let omega = rate * e_x + st.omega * k;
+        let alpha = accel * e_x + st.alpha * k + st.omega * rate * e_x.cross(k);
+        Some((omega, alpha))
     }
 }
 
@@ -353,6 +410,7 @@ pub struct Motion {
     pub pivot: Vector,
     tilt: f64,
     roll: Option<Wave>,
+    pitch: Option<Wave>,
     sway: Option<Wave>,
     heave: Option<Wave>,
     ramp: f64,
@@ -363,7 +421,7 @@ impl Motion {
     /// From the scenario's spec; `series` is the already-read table when the spec names one.
     pub fn new(spec: &MotionSpec, pivot: Vector, series: Option<MotionSeries>) -> Self {
         let wave = |s: &Option<HarmonicSpec>, scale| s.as_ref().map(|s| Wave::from_spec(s, scale));
-        let longest = [&spec.roll, &spec.sway, &spec.heave]
+        let longest = [&spec.roll, &spec.pitch, &spec.sway, &spec.heave]
             .into_iter()
             .flatten()
             .map(|h| h.period.0)
@@ -372,6 +430,7 @@ impl Motion {
             pivot,
             tilt: spec.tilt.to_radians(),
             roll: wave(&spec.roll, PI / 180.0),
+            pitch: wave(&spec.pitch, PI / 180.0),
             sway: wave(&spec.sway, 1.0),
             heave: wave(&spec.heave, 1.0),
             ramp: spec.ramp.unwrap_or(longest).max(0.0),
@@ -400,11 +459,11 @@ impl Motion {
 
     pub fn state(&self, t: f64) -> RigidState {
         let zero = [0.0; 3];
+        let r = self.ramp(t);
+        let w = |w: &Option<Wave>| w.map_or(zero, |w| w.at(t));
         let (angle, x, y) = match &self.series {
             Some(s) => (s.at(0, t), s.at(1, t), s.at(2, t)),
             None => {
-                let r = self.ramp(t);
-                let w = |w: &Option<Wave>| w.map_or(zero, |w| w.at(t));
                 let roll = w(&self.roll);
                 let angle = [self.tilt + roll[0], roll[1], roll[2]];
                 (
@@ -414,6 +473,12 @@ impl Motion {
                 )
             }
         };
+        // The loader refuses a pitch beside a series, and in 2D.
+        #[cfg(feature = "dim3")]
+        let pitch = match self.pitch {
+            Some(_) => Self::ramped(r, w(&self.pitch)),
+            None => zero,
+        };
         RigidState {
             angle: angle[0],
             omega: angle[1],
@@ -421,6 +486,8 @@ impl Motion {
             offset: dim::xy(x[0], y[0]),
             velocity: dim::xy(x[1], y[1]),
             acceleration: dim::xy(x[2], y[2]),
+            #[cfg(feature = "dim3")]
+            pitch,
         }
     }
 
@@ -448,6 +515,11 @@ impl Motion {
             Some(s) => s.max_abs(0),
             None => self.tilt.abs() + self.roll.map_or(0.0, |w| w.amplitude.abs()),
         }
+    }
+
+    /// Largest |pitch| over the run [rad] (a bound; 0 without pitch).
+    pub fn max_pitch(&self) -> f64 {
+        self.pitch.map_or(0.0, |w| w.amplitude.abs())
     }
 
     /// The period of the roll harmonic, if any [s].
@@ -524,6 +596,58 @@ mod tests {
         let d2x =
             (m.pose(0.3 + 1e-4).to_world(q) - 2.0 * x + m.pose(0.3 - 1e-4).to_world(q)) / 1e-8;
         assert!((d2x - pose.acceleration_at(x)).length() < 1e-4);
+    }
+
+    /// Roll, pitch and sway together: the pose round-trips, keeps distances, and its
+    /// velocity and acceleration at a point are the derivatives of where the point is.
+    #[cfg(feature = "dim3")]
+    #[test]
+    fn a_pitching_and_rolling_pose_moves_points_rigidly() {
+        let m = Motion::new(
+            &spec("(roll: (amplitude: 8.0, period: 1.3), pitch: (amplitude: 12.0, period: 0.9, phase: 40.0), sway: (amplitude: 0.02, period: 0.7), ramp: 0.5)"),
+            Vector::new(0.5, 0.0, 0.3),
+            None,
+        );
+        for t in [0.2, 0.61, 1.37] {
+            let pose = m.pose(t);
+            assert!(pose.state.pitch[0] != 0.0 && pose.state.angle != 0.0);
+            for q in [Vector::new(0.1, 0.4, 0.05), Vector::new(0.9, 0.2, 0.55)] {
+                let x = pose.to_world(q);
+                assert!((pose.to_body(x) - q).length() < 1e-12, "round trip at {t}");
+                let d = (x - pose.centre()).length() - (q - m.pivot).length();
+                assert!(d.abs() < 1e-12, "distance to the pivot at {t}");
+                let at = |dt: f64| m.pose(t + dt).to_world(q);
+                // Central differences: O(e^2) truncation, round-off ~1e-16/e (1e-10
+                // for the velocity) and ~1e-16/e^2 (1e-8 for the acceleration).
+                let e = 1e-6;
+                let v = (at(e) - at(-e)) / (2.0 * e);
+                let want = pose.velocity_at(x);
+                assert!((v - want).length() < 1e-7, "velocity at {t}: {v} vs {want}");
+                let e = 1e-4;
+                let a = (at(e) - 2.0 * x + at(-e)) / (e * e);
+                let want = pose.acceleration_at(x);
+                assert!(
+                    (a - want).length() < 1e-4,
+                    "acceleration at {t}: {a} vs {want}"
+                );
+            }
+        }
+        // The pitch's own derivatives, as the roll's.
+        let e = 1e-5;
+        for t in [0.3, 0.74] {
+            let (a, b, c) = (m.state(t - e), m.state(t), m.state(t + e));
+            assert!(((c.pitch[0] - a.pitch[0]) / (2.0 * e) - b.pitch[1]).abs() < 1e-6);
+            assert!(((c.pitch[1] - a.pitch[1]) / (2.0 * e) - b.pitch[2]).abs() < 1e-4);
+        }
+        // Without pitch the pose is the roll's (the pitch terms vanish exactly).
+        let roll = Motion::new(
+            &spec("(roll: (amplitude: 8.0, period: 1.3), ramp: 0.0)"),
+            m.pivot,
+            None,
+        );
+        assert_eq!(roll.state(0.4).pitch, [0.0; 3]);
+        assert_eq!(m.max_pitch(), 12f64.to_radians());
+        assert_eq!(roll.max_pitch(), 0.0);
     }
 
     #[test]

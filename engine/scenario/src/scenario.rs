@@ -328,7 +328,8 @@ impl Scenario {
     /// The bounding box beyond which a particle has left the domain: the walls' box
     /// widened by four kernel supports, and for an open tank twice its height upward.
     /// For a moving tank, the box swept by that box over the motion: a disc about the
-    /// pivot if it rolls, grown by the largest pivot displacement.
+    /// pivot if it rolls (a ball if it pitches), grown by the largest pivot
+    /// displacement.
     pub fn domain(&self) -> (Vector, Vector) {
         let mut lo = Vector::splat(f64::INFINITY);
         let mut hi = Vector::splat(f64::NEG_INFINITY);
@@ -355,6 +356,25 @@ impl Scenario {
             return (lo, hi);
         };
         let grow = Vector::splat(m.max_offset());
+        #[cfg(feature = "dim3")]
+        if m.max_pitch() > 0.0 {
+            // Turned about two axes through the pivot: the box's farthest corner from it.
+            let r = (0..8)
+                .map(|k| {
+                    let pick = |bit: usize, l: f64, h: f64| if k & bit == 0 { l } else { h };
+                    let c = Vector::new(
+                        pick(1, lo.x, hi.x),
+                        pick(2, lo.y, hi.y),
+                        pick(4, lo.z, hi.z),
+                    );
+                    (c - m.pivot).length()
+                })
+                .fold(0.0, f64::max);
+            return (
+                m.pivot - Vector::splat(r) - grow,
+                m.pivot + Vector::splat(r) + grow,
+            );
+        }
         if m.max_angle() == 0.0 {
             return (lo - grow, hi + grow);
         }

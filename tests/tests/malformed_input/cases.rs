@@ -651,6 +651,16 @@ pub fn cases() -> Vec<Case> {
             &["either the series or the harmonics"],
         ),
         case(
+            "pitch in 2D",
+            dam_value(
+                "tank",
+                "(width: 3.22, height: 1.8, motion: (pitch: (amplitude: 2.0, period: 1.0)))",
+            ),
+            LineOf("tank:"),
+            Is("pitch"),
+            &["x axis", "dimensions: 3", "roll"],
+        ),
+        case(
             "sweep without roll",
             dam_value("pipeline", "[]").replacen(
                 "pipeline: [],",

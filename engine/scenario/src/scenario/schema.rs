@@ -130,13 +130,18 @@ pub struct TankSpec {
 
 impl TankSpec {
     /// The roll axis: the motion's pivot, or the centre of the bottom (in 3D the
-    /// axis is the line through it along z).
+    /// axis is the line through it along z). A pitching 3D tank turns about the line
+    /// along x through it, at the middle of the tank's breadth.
     pub fn pivot(&self) -> Vector {
         let (x, y) = self
             .motion
             .as_ref()
             .and_then(|m| m.pivot)
             .unwrap_or((0.5 * self.width.0, 0.0));
+        #[cfg(feature = "dim3")]
+        if self.motion.as_ref().is_some_and(|m| m.pitch.is_some()) {
+            return Vector::new(x, y, 0.5 * self.breadth.0);
+        }
         dim::xy(x, y)
     }
 }
@@ -237,7 +242,8 @@ pub struct SensorSpec {
     pub wall: String,
     /// Sensor centre [m]; must lie on the wall.
     pub at: Coords,
-    /// Width along the wall [m] used by Method III. Default: 2 h.
+    /// Width along the wall [m] used by Method III (in 3D the side of its square
+    /// face). Default: 2 h.
     #[serde(default)]
     pub width: Option<Positive>,
     /// A transducer's face diameter [m]: the `<sensor>.<method>.transducer` column

@@ -584,13 +584,25 @@ pub(crate) fn motion(
             .key(&["tank", "motion", key])
             .or_else(|| at.doc.key(&["tank", "motion"]))
     };
+    if m.pitch.is_some() && dim::DIM == 2 {
+        return Err(at.error(
+            "pitch",
+            place("pitch"),
+            "a pitch turns the tank about its x axis, out of a 2D scene's plane; accepted in scenes with `dimensions: 3` (in 2D the tank rolls: `roll`)".into(),
+        ));
+    }
     let series = match &m.series {
         Some(file) => {
-            if m.roll.is_some() || m.sway.is_some() || m.heave.is_some() || m.tilt != 0.0 {
+            if m.roll.is_some()
+                || m.pitch.is_some()
+                || m.sway.is_some()
+                || m.heave.is_some()
+                || m.tilt != 0.0
+            {
                 return Err(at.error(
                     "series",
                     place("series"),
-                    "a motion series replaces tilt, roll, sway and heave; give either the series or the harmonics".into(),
+                    "a motion series replaces tilt, roll, pitch, sway and heave; give either the series or the harmonics".into(),
                 ));
             }
             let path = source.parent().unwrap_or(Path::new(".")).join(file);
@@ -614,7 +626,12 @@ pub(crate) fn motion(
             ));
         }
     }
-    for (key, h) in [("roll", &m.roll), ("sway", &m.sway), ("heave", &m.heave)] {
+    for (key, h) in [
+        ("roll", &m.roll),
+        ("pitch", &m.pitch),
+        ("sway", &m.sway),
+        ("heave", &m.heave),
+    ] {
         if h.as_ref()
             .is_some_and(|h| !h.amplitude.is_finite() || !h.phase.is_finite())
         {

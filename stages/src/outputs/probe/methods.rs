@@ -8,7 +8,9 @@
 //! - Method III (`Averaged`, Oger et al. 2005): fluid particles within 1.5 h of the wall
 //!   whose projection falls inside the sensor width S, projected onto the wall with the
 //!   same hydrostatic correction, sorted along the wall abscissa q and averaged with
-//!   weights dS_k = (q_{k+1} - q_{k-1})/2 (the sensor's edges close the ends).
+//!   weights dS_k = (q_{k+1} - q_{k-1})/2 (the sensor's edges close the ends). In 3D
+//!   the face is the S x S square about the sensor, each sample is carried to the
+//!   sensor's centre, and their plain mean is taken.
 //!
 //! A sensor with no fluid within the kernel support reads 0 (dry).
 
@@ -137,15 +139,35 @@ impl ExtractionMethod for Averaged {
         // A face cannot reach past the wall's ends: near a corner it is narrowed about
         // its centre to fit (else the fluid-less part past the corner moves the face's
         // mean pressure off the sensor's height: -1.1 % at 0.5 ds above a still floor).
-        let fit = (0.5 * site.width).min(centre).min(wall.length() - centre);
-        let half = if fit > 0.0 { fit } else { 0.5 * site.width };
-        let (lo, hi) = (centre - half, centre + half);
+        let face = |centre: f64, length: f64| {
+            let fit = (0.5 * site.width).min(centre).min(length - centre);
+            let half = if fit > 0.0 { fit } else { 0.5 * site.width };
+            (centre - half, centre + half)
+        };
+        let (lo, hi) = face(centre, wall.length());
+        // In 3D the face is the S x S square about the sensor: S across the wall too
+        // (else the whole breadth of the wall is averaged), narrowed the same way.
+        #[cfg(feature = "dim3")]
+        let across = face(site.across, wall.breadth());
+        let inside = |q: Vector| {
+            #[cfg(feature = "dim3")]
+            if !(across.0..=across.1).contains(&wall.abscissa_across(q)) {
+                return false;
+            }
+            (lo..=hi).contains(&wall.abscissa(q))
+        };
         let sample = |i: usize| {
             let q = x[i].0;
             let (d, a) = (wall.distance(q), wall.abscissa(q));
-            ((0.0..reach).contains(&d) && (lo..=hi).contains(&a)).then(|| {
-                let on_wall = q - d * wall.normal();
-                (a, carry.carry(p[i].0, q, on_wall))
+            ((0.0..reach).contains(&d) && inside(q)).then(|| {
+                // In 3D each is carried on to the sensor's centre: the plain mean then
+                // reads the hydrostatic pressure there whichever rows the face's
+                // edges take in (a lattice's rows can sit on them).
+                #[cfg(not(feature = "dim3"))]
+                let to = q - d * wall.normal();
+                #[cfg(feature = "dim3")]
+                let to = site.point();
+                (a, carry.carry(p[i].0, q, to))
             })
         };
         let Self {
@@ -160,14 +182,29 @@ impl ExtractionMethod for Averaged {
             // gives the same list.
             Some(nb) => {
                 candidates.clear();
-                let points = ((hi - lo) / (0.5 * sim.constants.h)).ceil().clamp(1.0, 1e4) as usize;
-                for k in 0..=points {
-                    let at = wall.point(lo + (hi - lo) * k as f64 / points as f64);
-                    nb.grid.for_each_near(at, |j| {
-                        if (j as usize) < x.len() {
-                            candidates.push(j)
-                        }
-                    });
+                let step = 0.5 * sim.constants.h;
+                let steps = |lo: f64, hi: f64| ((hi - lo) / step).ceil().clamp(1.0, 1e4) as usize;
+                let points = steps(lo, hi);
+                // In 3D the points cover the square face, row by row across it.
+                #[cfg(not(feature = "dim3"))]
+                let rows = [Vector::ZERO];
+                #[cfg(feature = "dim3")]
+                let rows = {
+                    let (c0, c1) = across;
+                    let n = steps(c0, c1);
+                    (0..=n).map(move |m| {
+                        (c0 + (c1 - c0) * m as f64 / n as f64) * wall.tangent_across()
+                    })
+                };
+                for row in rows {
+                    for k in 0..=points {
+                        let at = wall.point(lo + (hi - lo) * k as f64 / points as f64) + row;
+                        nb.grid.for_each_near(at, |j| {
+                            if (j as usize) < x.len() {
+                                candidates.push(j)
+                            }
+                        });
+                    }
                 }
                 candidates.sort_unstable();
                 candidates.dedup();
@@ -179,28 +216,48 @@ impl ExtractionMethod for Averaged {
         if samples.is_empty() {
             return Ok(0.0);
         }
-        samples.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
-        let q = |k: isize| -> f64 {
-            if k < 0 {
-                lo
-            } else if k as usize >= samples.len() {
-                hi
-            } else {
-                samples[k as usize].0
-            }
-        };
-        let (mut num, mut den) = (0.0, 0.0);
-        for (k, &(_, pk)) in samples.iter().enumerate() {
-            let k = k as isize;
-            let ds = 0.5 * (q(k + 1) - q(k - 1));
-            num += pk * ds;
-            den += ds;
-        }
-        Ok(if den > 0.0 {
-            num / den
+        // In 3D Oger's weights along one edge do not measure a face's area: particles
+        // of one column across the face tie in q and all but two get none. The
+        // lattice gives each particle about the same share of the face: the mean.
+        #[cfg(feature = "dim3")]
+        let _ = (lo, hi);
+        #[cfg(feature = "dim3")]
+        return Ok(mean(samples));
+        #[cfg(not(feature = "dim3"))]
+        return Ok(oger(samples, lo, hi));
+    }
+}
+
+/// The mean of the samples' pressures.
+fn mean(samples: &[(f64, f64)]) -> f64 {
+    samples.iter().map(|s| s.1).sum::<f64>() / samples.len() as f64
+}
+
+/// Oger's weighted mean of the samples (abscissa, pressure) over the face [lo, hi]:
+/// sorted along it, each weighted by half the gap between its neighbours.
+#[cfg(not(feature = "dim3"))]
+fn oger(samples: &mut [(f64, f64)], lo: f64, hi: f64) -> f64 {
+    samples.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    let q = |k: isize| -> f64 {
+        if k < 0 {
+            lo
+        } else if k as usize >= samples.len() {
+            hi
         } else {
-            samples.iter().map(|s| s.1).sum::<f64>() / samples.len() as f64
-        })
+            samples[k as usize].0
+        }
+    };
+    let (mut num, mut den) = (0.0, 0.0);
+    for (k, &(_, pk)) in samples.iter().enumerate() {
+        let k = k as isize;
+        let ds = 0.5 * (q(k + 1) - q(k - 1));
+        num += pk * ds;
+        den += ds;
+    }
+    if den > 0.0 {
+        num / den
+    } else {
+        mean(samples)
     }
 }
 
