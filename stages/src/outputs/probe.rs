@@ -80,6 +80,12 @@ pub struct Params {
     /// Roll angle [deg] and the liquid's roll moment about the tank pivot (2D: N m per
     /// m of depth, 3D: N m); needs a tank and Forces before Probe. Default false.
     pub roll_moment: bool,
+    /// Pitch angle [deg] and the liquid's moment about the pitch axis (the x axis
+    /// through the tank pivot) [N m], positive as a positive pitch turns; 3D only;
+    /// needs a tank and Forces before Probe. Default false (and then left out of a
+    /// resolved scenario, so that 2D files read as before).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub pitch_moment: bool,
     /// Piston displacement from its rest position [m] (`piston_x`) and the fluid's
     /// horizontal force on the paddle (`piston_force`; 2D: N per m of depth, 3D: N):
     /// Method I pressure integrated over the paddle in cells of about ds. Needs a
@@ -100,6 +106,7 @@ impl Default for Params {
             max_speed: false,
             neighbours: false,
             roll_moment: false,
+            pitch_moment: false,
             piston: false,
             plots: true,
         }
@@ -258,17 +265,27 @@ impl Stage for Probe {
                 "neighbour statistics need NeighbourGrid(count: true) before Probe()".into(),
             ));
         }
-        if self.params.roll_moment {
+        if self.params.pitch_moment && sph_core::dim::DIM == 2 {
+            return Err(err(
+                "pitch_moment is the moment about a 3D tank's x axis; a 2D tank rolls: use roll_moment, or give the scene `dimensions: 3`".into(),
+            ));
+        }
+        for (on, name) in [
+            (self.params.roll_moment, "roll_moment"),
+            (self.params.pitch_moment, "pitch_moment"),
+        ] {
+            if !on {
+                continue;
+            }
             if sim.world.query::<&Tank>().iter().next().is_none() {
-                return Err(err(
-                    "roll_moment needs a `tank` (the moment is taken about its pivot)".into(),
-                ));
+                return Err(err(format!(
+                    "{name} needs a `tank` (the moment is taken about its pivot)"
+                )));
             }
             if archetype::<Fluid>(&sim.world).is_some_and(|a| !a.has::<Acceleration>()) {
-                return Err(err(
-                    "roll_moment needs the particle accelerations: put Forces() before Probe()"
-                        .into(),
-                ));
+                return Err(err(format!(
+                    "{name} needs the particle accelerations: put Forces() before Probe()"
+                )));
             }
         }
         if self.params.piston && self.piston.is_none() {
@@ -438,18 +455,26 @@ impl Stage for Probe {
                 &["max_speed"],
             )?;
         }
-        if self.params.roll_moment {
+        // Each turn's angle and the liquid's moment about its axis.
+        for (on, turn, unit) in [
+            (self.params.roll_moment, "roll", PER_DEPTH),
+            (self.params.pitch_moment, "pitch", ""),
+        ] {
+            if !on {
+                continue;
+            }
+            let (angle, moment) = (format!("{turn}_angle"), format!("{turn}_moment"));
             out.plot(
-                &dir.join("probe_roll_angle.png"),
-                &title("roll angle"),
-                "roll angle [deg]",
-                &["roll_angle"],
+                &dir.join(format!("probe_{angle}.png")),
+                &title(&format!("{turn} angle")),
+                &format!("{turn} angle [deg]"),
+                &[angle.as_str()],
             )?;
             out.plot(
-                &dir.join("probe_roll_moment.png"),
-                &title("liquid roll moment about the pivot"),
-                &format!("moment [N m{PER_DEPTH}]"),
-                &["roll_moment"],
+                &dir.join(format!("probe_{moment}.png")),
+                &title(&format!("liquid {turn} moment about the pivot")),
+                &format!("moment [N m{unit}]"),
+                &[moment.as_str()],
             )?;
         }
         if self.params.piston {
@@ -491,7 +516,7 @@ impl Stage for Probe {
             .reads::<BodyPose>()
             .reads_if::<Neighbours>(self.params.piston)
             .reads_if::<NeighbourCount>(self.params.neighbours)
-            .reads_if::<Acceleration>(self.params.roll_moment)
+            .reads_if::<Acceleration>(self.params.roll_moment || self.params.pitch_moment)
             .uses::<Guarded>()
             .uses::<Ghost>()
             .uses::<DensityFloored>()
@@ -536,6 +561,10 @@ impl Probe {
                 &["neighbours_min", "neighbours_mean", "neighbours_max"][..],
             ),
             (self.params.roll_moment, &["roll_angle", "roll_moment"][..]),
+            (
+                self.params.pitch_moment && sph_core::dim::DIM == 3,
+                &["pitch_angle", "pitch_moment"][..],
+            ),
             (self.params.piston, &["piston_x", "piston_force"][..]),
         ];
         for (on, names) in flags {

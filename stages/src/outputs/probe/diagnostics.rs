@@ -24,10 +24,22 @@ pub fn roll_moment(
     centre: Vector,
     g: Vector,
 ) -> f64 {
+    moment(x, a, m, centre, g, sph_core::dim::cross_z)
+}
+
+/// sum_i m_i c(x_i - centre, g - a_i): the component `c` of (r x F) the moment is of.
+fn moment(
+    x: &[Position],
+    a: &[Acceleration],
+    m: &[Mass],
+    centre: Vector,
+    g: Vector,
+    c: impl Fn(Vector, Vector) -> f64,
+) -> f64 {
     x.iter()
         .zip(a)
         .zip(m)
-        .map(|((x, a), m)| m.0 * sph_core::dim::cross_z(x.0 - centre, g - a.0))
+        .map(|((x, a), m)| m.0 * c(x.0 - centre, g - a.0))
         .sum()
 }
 
@@ -102,6 +114,19 @@ pub(super) fn sample(
             pose.centre(),
             sim.constants.gravity,
         ));
+    }
+    // Setup refuses `pitch_moment` in 2D.
+    #[cfg(feature = "dim3")]
+    if p.pitch_moment {
+        let (a, m) = (
+            particles.fluid::<Acceleration>()?,
+            particles.fluid::<Mass>()?,
+        );
+        row.push(pose.state.pitch[0].to_degrees());
+        // M_x = sum_i m_i ((x_i - P) x (g - a_i)).x: about the x axis through the
+        // pivot, positive as a positive pitch turns (+y towards +z).
+        let g = sim.constants.gravity;
+        row.push(moment(&x, &a, &m, pose.centre(), g, |r, f| r.cross(f).x));
     }
     if let Some(piston) = piston {
         let wall = *sim
