@@ -79,7 +79,39 @@ pub struct RigidState {
     pub acceleration: Vector,
     /// Pitch phi [rad], its rate [rad/s] and acceleration [rad/s^2] (3D).
     #[cfg(feature = "dim3")]
-    pub pitch: [f64; 3],
+    pub pitch: Pitch,
+}
+
+/// A pitch phi [rad] about the x axis, its rate [rad/s] and acceleration [rad/s^2],
+/// with the pitched z axis k = R_x(phi) z worked out once, not at every point whose
+/// velocity is asked for (3D).
+#[cfg(feature = "dim3")]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pitch {
+    values: [f64; 3],
+    k: Vector,
+}
+
+#[cfg(feature = "dim3")]
+impl Default for Pitch {
+    fn default() -> Self {
+        Self::new([0.0; 3])
+    }
+}
+
+#[cfg(feature = "dim3")]
+impl Pitch {
+    pub fn new(values: [f64; 3]) -> Self {
+        let (s, c) = values[0].sin_cos();
+        Self {
+            values,
+            k: Vector::new(0.0, -s, c),
+        }
+    }
+    /// [phi, phi', phi''].
+    pub fn values(&self) -> [f64; 3] {
+        self.values
+    }
 }
 
 /// Where the tank frame is: maps tank-frame points to the world and back, and gives the
@@ -145,14 +177,14 @@ impl Pose {
             pivot: self.pivot,
             rotation: DVec2::from_angle(self.state.angle),
             #[cfg(feature = "dim3")]
-            pitch: DVec2::from_angle(self.state.pitch[0]),
+            pitch: DVec2::from_angle(self.state.pitch.values()[0]),
         }
     }
     /// A world point in the tank frame.
     pub fn to_body(&self, x: Vector) -> Vector {
         let r = x - self.centre();
         #[cfg(feature = "dim3")]
-        let r = rotate_x(DVec2::from_angle(-self.state.pitch[0]), r);
+        let r = rotate_x(DVec2::from_angle(-self.state.pitch.values()[0]), r);
         self.pivot + dim::rotate_z(DVec2::from_angle(-self.state.angle), r)
     }
     /// Velocity of the tank at world point x: V + omega k x r.
@@ -181,12 +213,11 @@ impl Pose {
     /// (e_x x k).
     #[cfg(feature = "dim3")]
     fn spin(&self) -> Option<(Vector, Vector)> {
-        let [phi, rate, accel] = self.state.pitch;
-        if (phi, rate, accel) == (0.0, 0.0, 0.0) {
+        let Pitch { values, k } = self.state.pitch;
+        let [_, rate, accel] = values;
+        if values == [0.0; 3] {
             return None;
         }
-        let (s, c) = phi.sin_cos();
-        let k = Vector::new(0.0, -s, c);
         let e_x = Vector::X;
         let st = &self.state;
         let omega = rate * e_x + st.omega * k;
@@ -475,10 +506,10 @@ impl Motion {
         };
         // The loader refuses a pitch beside a series, and in 2D.
         #[cfg(feature = "dim3")]
-        let pitch = match self.pitch {
+        let pitch = Pitch::new(match self.pitch {
             Some(_) => Self::ramped(r, w(&self.pitch)),
             None => zero,
-        };
+        });
         RigidState {
             angle: angle[0],
             omega: angle[1],
@@ -610,7 +641,7 @@ mod tests {
         );
         for t in [0.2, 0.61, 1.37] {
             let pose = m.pose(t);
-            assert!(pose.state.pitch[0] != 0.0 && pose.state.angle != 0.0);
+            assert!(pose.state.pitch.values()[0] != 0.0 && pose.state.angle != 0.0);
             for q in [Vector::new(0.1, 0.4, 0.05), Vector::new(0.9, 0.2, 0.55)] {
                 let x = pose.to_world(q);
                 assert!((pose.to_body(x) - q).length() < 1e-12, "round trip at {t}");
@@ -636,8 +667,16 @@ mod tests {
         let e = 1e-5;
         for t in [0.3, 0.74] {
             let (a, b, c) = (m.state(t - e), m.state(t), m.state(t + e));
-            assert!(((c.pitch[0] - a.pitch[0]) / (2.0 * e) - b.pitch[1]).abs() < 1e-6);
-            assert!(((c.pitch[1] - a.pitch[1]) / (2.0 * e) - b.pitch[2]).abs() < 1e-4);
+            assert!(
+                ((c.pitch.values()[0] - a.pitch.values()[0]) / (2.0 * e) - b.pitch.values()[1])
+                    .abs()
+                    < 1e-6
+            );
+            assert!(
+                ((c.pitch.values()[1] - a.pitch.values()[1]) / (2.0 * e) - b.pitch.values()[2])
+                    .abs()
+                    < 1e-4
+            );
         }
         // Without pitch the pose is the roll's (the pitch terms vanish exactly).
         let roll = Motion::new(
@@ -645,7 +684,7 @@ mod tests {
             m.pivot,
             None,
         );
-        assert_eq!(roll.state(0.4).pitch, [0.0; 3]);
+        assert_eq!(roll.state(0.4).pitch.values(), [0.0; 3]);
         assert_eq!(m.max_pitch(), 12f64.to_radians());
         assert_eq!(roll.max_pitch(), 0.0);
     }

@@ -359,17 +359,7 @@ impl Scenario {
         #[cfg(feature = "dim3")]
         if m.max_pitch() > 0.0 {
             // Turned about two axes through the pivot: the box's farthest corner from it.
-            let r = (0..8)
-                .map(|k| {
-                    let pick = |bit: usize, l: f64, h: f64| if k & bit == 0 { l } else { h };
-                    let c = Vector::new(
-                        pick(1, lo.x, hi.x),
-                        pick(2, lo.y, hi.y),
-                        pick(4, lo.z, hi.z),
-                    );
-                    (c - m.pivot).length()
-                })
-                .fold(0.0, f64::max);
+            let r = farthest_corner(lo, hi, m.pivot, 3);
             return (
                 m.pivot - Vector::splat(r) - grow,
                 m.pivot + Vector::splat(r) + grow,
@@ -379,16 +369,7 @@ impl Scenario {
             return (lo - grow, hi + grow);
         }
         // A roll about z: the x-y rectangle's corners' farthest reach from the axis.
-        let corners = [
-            dim::xy(lo.x, lo.y),
-            dim::xy(hi.x, hi.y),
-            dim::xy(lo.x, hi.y),
-            dim::xy(hi.x, lo.y),
-        ];
-        let r = corners
-            .iter()
-            .map(|c| dim::in_xy(*c - m.pivot).length())
-            .fold(0.0, f64::max);
+        let r = farthest_corner(lo, hi, m.pivot, 2);
         let reach = dim::xy(r, r) + grow;
         #[cfg(feature = "dim3")]
         let (lo, hi) = (
@@ -601,6 +582,22 @@ fn faces(min: Vector, size: Vector, inward: bool) -> Vec<Wall> {
             wall("top", v(0.0, h, 0.0), v(0.0, h, d), v(w, h, 0.0)),
         ]
     }
+}
+
+/// The largest distance from `centre` of the box [lo, hi]'s corners, in their first
+/// `axes` components (2: the x-y rectangle's, the reach of a roll about z; 3: the
+/// box's, the reach of a turn about any axis through `centre`).
+fn farthest_corner(lo: Vector, hi: Vector, centre: Vector, axes: usize) -> f64 {
+    let axes = axes.min(dim::DIM);
+    (0..1usize << axes)
+        .map(|k| {
+            let square = |i: usize| {
+                let c = if k >> i & 1 == 0 { lo[i] } else { hi[i] };
+                (c - centre[i]).powi(2)
+            };
+            (0..axes).map(square).sum::<f64>().sqrt()
+        })
+        .fold(0.0, f64::max)
 }
 
 #[cfg(test)]

@@ -122,7 +122,7 @@ pub(super) fn sample(
             particles.fluid::<Acceleration>()?,
             particles.fluid::<Mass>()?,
         );
-        row.push(pose.state.pitch[0].to_degrees());
+        row.push(pose.state.pitch.values()[0].to_degrees());
         // M_x = sum_i m_i ((x_i - P) x (g - a_i)).x: about the x axis through the
         // pivot, positive as a positive pitch turns (+y towards +z).
         let g = sim.constants.gravity;

@@ -216,15 +216,7 @@ impl ExtractionMethod for Averaged {
         if samples.is_empty() {
             return Ok(0.0);
         }
-        // In 3D Oger's weights along one edge do not measure a face's area: particles
-        // of one column across the face tie in q and all but two get none. The
-        // lattice gives each particle about the same share of the face: the mean.
-        #[cfg(feature = "dim3")]
-        let _ = (lo, hi);
-        #[cfg(feature = "dim3")]
-        return Ok(mean(samples));
-        #[cfg(not(feature = "dim3"))]
-        return Ok(oger(samples, lo, hi));
+        Ok(face_mean(samples, lo, hi))
     }
 }
 
@@ -233,10 +225,20 @@ fn mean(samples: &[(f64, f64)]) -> f64 {
     samples.iter().map(|s| s.1).sum::<f64>() / samples.len() as f64
 }
 
-/// Oger's weighted mean of the samples (abscissa, pressure) over the face [lo, hi]:
-/// sorted along it, each weighted by half the gap between its neighbours.
+/// The face's mean pressure in 3D: Oger's weights along one edge do not measure a
+/// face's area (particles of one column across the face tie in q and all but two get
+/// none), while the lattice gives each particle about the same share of the face: the
+/// plain mean. The abscissae go unused.
+#[cfg(feature = "dim3")]
+fn face_mean(samples: &mut [(f64, f64)], _lo: f64, _hi: f64) -> f64 {
+    mean(samples)
+}
+
+/// The face's mean pressure in 2D: Oger's weighted mean of the samples (abscissa,
+/// pressure) over the face [lo, hi], sorted along it, each weighted by half the gap
+/// between its neighbours.
 #[cfg(not(feature = "dim3"))]
-fn oger(samples: &mut [(f64, f64)], lo: f64, hi: f64) -> f64 {
+fn face_mean(samples: &mut [(f64, f64)], lo: f64, hi: f64) -> f64 {
     samples.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
     let q = |k: isize| -> f64 {
         if k < 0 {
