@@ -24,7 +24,6 @@ pub(crate) use walls::wall_work;
 pub use walls::{wall_particles, wall_pressure};
 
 pub mod equations;
-#[cfg(not(feature = "dim3"))]
 pub use equations::density_gradient;
 pub(crate) use equations::rates;
 pub use equations::shifting;

@@ -38,16 +38,16 @@ pub struct DensityGradient;
 
 impl ColumnKey for DensityGradient {
     const NAME: &'static str = "DensityGradient";
-    const SLOTS: &'static [Field] = &[Self::X, Self::Y];
+    /// One slot per component: x, y[, z].
+    #[cfg(not(feature = "dim3"))]
+    const SLOTS: &'static [Field] = &[Field::Slot0, Field::Slot1];
+    #[cfg(feature = "dim3")]
+    const SLOTS: &'static [Field] = &[Field::Slot0, Field::Slot1, Field::Slot2];
 }
 
 impl DensityGradient {
-    /// The gradient's x component [kg/m^4] in the records.
-    pub const X: Field = Field::Slot0;
-    /// Its y component.
-    pub const Y: Field = Field::Slot1;
-    /// Both.
-    pub const FIELDS: Fields = Fields::of(Self::SLOTS);
+    /// Its components [kg/m^4] in the records, x, y[, z].
+    pub const FIELDS: Fields = Fields::of(<Self as ColumnKey>::SLOTS);
 }
 
 /// Each fluid particle's sum_j m_j W_ij over its neighbours (fluid and ghosts, i

@@ -17,6 +17,7 @@ use crate::vocab::DensityGradient;
 use crate::vocab::GradientUnrenormalised;
 use rayon::prelude::*;
 use sph_core::components::Ghost;
+use sph_core::dim::{Vector, DIM};
 use sph_core::pair::{
     with_records, Columns, Field, Fields, Lane, Layouts, Me, Pair, PairTerm, Pass, Scope,
 };
@@ -28,48 +29,72 @@ use sph_core::with_kernel;
 use sph_core::world::{archetype, column};
 
 /// The sums of one particle: the matrix sum_j x_ji (x) grad W V_j (symmetric: grad W
-/// lies along x_ji) and sum_j (rho_j - rho_i) grad W V_j.
+/// lies along x_ji), its upper triangle row by row, then sum_j (rho_j - rho_i) grad W
+/// V_j.
 #[derive(Clone)]
 pub struct Renormalised;
 
 /// Below this determinant of the matrix, its inverse is not used.
 const SINGULAR: f64 = 1e-3;
 
+/// The matrix's upper triangle, DIM (DIM + 1) / 2 entries.
+const MATRIX: usize = DIM * (DIM + 1) / 2;
+
 impl PairTerm for Renormalised {
-    // Packed with (x, y, rho, m) by its stage.
+    // Packed with (position, rho, m) by its stage.
     const LAYOUTS: Layouts = Layouts::FILTER;
-    type Acc<L: Lane> = [L; 5];
+    type Acc<L: Lane> = [L; MATRIX + DIM];
     /// The gradient, and whether the matrix was singular.
-    type Out = (glam::DVec2, bool);
+    type Out = (Vector, bool);
     fn reads(&self) -> Fields {
         Fields::of(&[Field::Rho])
     }
     #[inline(always)]
-    fn zero<L: Lane>(&self) -> [L; 5] {
-        [L::zero(); 5]
+    fn zero<L: Lane>(&self) -> [L; MATRIX + DIM] {
+        [L::zero(); MATRIX + DIM]
     }
     #[inline(always)]
-    fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, acc: &mut [L; 5]) {
+    fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, acc: &mut [L; MATRIX + DIM]) {
         let v = p.j(Field::Mass) / p.j(Field::Rho);
-        let (vx, vy) = (v * p.gx, v * p.gy);
-        // x_ji = -(dx, dy).
-        acc[0] = acc[0] - p.dx * vx;
-        acc[1] = acc[1] - p.dx * vy;
-        acc[2] = acc[2] - p.dy * vy;
+        // V grad W, written as a loop: `array::map` is not inlined in the pair loop.
+        let mut vg = p.grad();
+        for g in &mut vg {
+            *g = v * *g;
+        }
+        // x_ji = -x_ij.
+        let x = p.x_ij();
+        let mut k = 0;
+        for a in 0..DIM {
+            for &vg_b in &vg[a..] {
+                acc[k] = acc[k] - x[a] * vg_b;
+                k += 1;
+            }
+        }
         let d = p.j(Field::Rho) - me.lanes::<L>(Field::Rho);
-        acc[3] = acc[3] + d * vx;
-        acc[4] = acc[4] + d * vy;
+        for (s, &vg_a) in acc[MATRIX..].iter_mut().zip(&vg) {
+            *s = *s + d * vg_a;
+        }
     }
-    fn finish<L: Lane>(&self, _: &Me, acc: [L; 5]) -> (glam::DVec2, bool) {
+    #[cfg(not(feature = "dim3"))]
+    fn finish<L: Lane>(&self, _: &Me, acc: [L; MATRIX + DIM]) -> (Vector, bool) {
         let [a, b, c, gx, gy] = acc.map(L::sum);
         let det = a * c - b * b;
         if det.abs() < SINGULAR || !det.is_finite() {
-            return (glam::DVec2::new(gx, gy), true);
+            return (Vector::new(gx, gy), true);
         }
-        (
-            glam::DVec2::new(c * gx - b * gy, a * gy - b * gx) / det,
-            false,
-        )
+        (Vector::new(c * gx - b * gy, a * gy - b * gx) / det, false)
+    }
+    /// In 3D the same solve with the 3 x 3 matrix.
+    #[cfg(feature = "dim3")]
+    fn finish<L: Lane>(&self, _: &Me, acc: [L; MATRIX + DIM]) -> (Vector, bool) {
+        let [a00, a01, a02, a11, a12, a22, gx, gy, gz] = acc.map(L::sum);
+        let sum = Vector::new(gx, gy, gz);
+        let m = glam::DMat3::from_cols_array(&[a00, a01, a02, a01, a11, a12, a02, a12, a22]);
+        let det = m.determinant();
+        if det.abs() < SINGULAR || !det.is_finite() {
+            return (sum, true);
+        }
+        (m.inverse() * sum, false)
     }
 }
 
@@ -88,7 +113,7 @@ pub(crate) fn compute(sim: &mut Sim) -> Result<(), StepError> {
         };
         let n = nb.n_fluid;
         out.clear();
-        out.resize(records.len(), glam::DVec2::ZERO);
+        out.resize(records.len(), Vector::ZERO);
         let c = &sim.constants;
         let singular = with_kernel!(c.kernel, c.h, |k| {
             let pass = Pass::new(&Renormalised, k, records)

@@ -3,8 +3,6 @@
 
 pub mod continuity;
 pub mod damping_zone;
-// Not yet built in 3D (docs/architecture.md, "Two and three dimensions").
-#[cfg(not(feature = "dim3"))]
 pub mod density_gradient;
 pub mod eos;
 pub mod forces;

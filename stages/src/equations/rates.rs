@@ -125,9 +125,7 @@ pub(crate) fn run(
     const PG_AV_AP_C_F: u16 = PG_AV_AP_C | bits(&[Fourtakas]);
     const PG_AV_C_MC: u16 = PG_AV_C | bits(&[MolteniColagrossi]);
     const PG_AV_C_F: u16 = PG_AV_C | bits(&[Fourtakas]);
-    #[cfg(not(feature = "dim3"))]
     const PG_AV_AP_C_D: u16 = PG_AV_AP_C | bits(&[DeltaSph]);
-    #[cfg(not(feature = "dim3"))]
     const PG_AV_C_D: u16 = PG_AV_C | bits(&[DeltaSph]);
     const RIEMANN: u16 = bits(&[RiemannPressure, Continuity, RiemannDiffusion]);
     if let Some(sums) = kernel_sums {
@@ -149,6 +147,8 @@ pub(crate) fn run(
             PG_AV_AP_C_F,
             PG_AV_AP_C_MC,
             PG_AV_C_MC,
+            PG_AV_AP_C_D,
+            PG_AV_C_D,
             PG_AV,
             C,
         );

@@ -11,7 +11,7 @@ use super::Term;
 use crate::vocab::DensityGradient;
 use crate::vocab::GradientUnrenormalised;
 use sph_core::contract::Access;
-use sph_core::pair::{Field, Fields, Lane, Me, Pair, RateTerm, Rates};
+use sph_core::pair::{ColumnKey, Field, Fields, Lane, Me, Pair, RateTerm, Rates};
 use sph_core::sim::Constants;
 
 /// `DeltaSph(delta: 0.1)`.
@@ -52,12 +52,19 @@ impl RateTerm for DeltaSph {
     const SYMMETRIC: bool = true;
     #[inline(always)]
     fn pair_both<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>, rj: &mut Rates<L>) {
-        // (rho_j - rho_i) - (1/2)(G_i + G_j) . x_ji, with x_ji = -(dx, dy): the flux of
+        // (rho_j - rho_i) - (1/2)(G_i + G_j) . x_ji, with x_ji = -x_ij: the flux of
         // 2 d x_ji / r^2 . grad W is then psi_ij . grad W.
+        let x = p.x_ij();
+        let g = |a: usize| {
+            let slot = DensityGradient::SLOTS[a];
+            me.lanes::<L>(slot) + p.j(slot)
+        };
+        let mut g_dot_x = g(0) * x[0];
+        for (a, &x_a) in x.iter().enumerate().skip(1) {
+            g_dot_x = g_dot_x + g(a) * x_a;
+        }
         let half = L::splat(0.5);
-        let gx = me.lanes::<L>(DensityGradient::X) + p.j(DensityGradient::X);
-        let gy = me.lanes::<L>(DensityGradient::Y) + p.j(DensityGradient::Y);
-        let d = p.j(Field::Rho) - me.lanes::<L>(Field::Rho) + half * (gx * p.dx + gy * p.dy);
+        let d = p.j(Field::Rho) - me.lanes::<L>(Field::Rho) + half * g_dot_x;
         let (fi, fj) = self.scale.fluxes(me, p, d, L::zero() - d);
         r.diffusion = r.diffusion + fi;
         rj.diffusion = rj.diffusion + fj;

@@ -13,8 +13,6 @@
 pub mod artificial_pressure;
 pub mod artificial_viscosity;
 pub mod continuity;
-// Not yet built in 3D (docs/architecture.md, "Two and three dimensions").
-#[cfg(not(feature = "dim3"))]
 pub mod delta_sph;
 pub mod diffusion;
 pub mod fourtakas;
@@ -385,7 +383,6 @@ pub fn plugin_terms(specs: &[TermSpec], c: &Constants, wall_shear: bool) -> Vec<
         .collect()
 }
 
-#[cfg(not(feature = "dim3"))]
 rate_terms! {
     pressure_gradient::PressureGradient,
     artificial_viscosity::ArtificialViscosity,
@@ -395,21 +392,6 @@ rate_terms! {
     molteni_colagrossi::MolteniColagrossi,
     fourtakas::Fourtakas,
     delta_sph::DeltaSph,
-    riemann_pressure::RiemannPressure,
-    riemann_diffusion::RiemannDiffusion,
-}
-
-// 3D: delta-SPH's density gradient is a keyed vector column, two slots so far
-// (docs/architecture.md, "Two and three dimensions").
-#[cfg(feature = "dim3")]
-rate_terms! {
-    pressure_gradient::PressureGradient,
-    artificial_viscosity::ArtificialViscosity,
-    artificial_pressure::ArtificialPressure,
-    laminar_viscosity::LaminarViscosity,
-    continuity::Continuity,
-    molteni_colagrossi::MolteniColagrossi,
-    fourtakas::Fourtakas,
     riemann_pressure::RiemannPressure,
     riemann_diffusion::RiemannDiffusion,
 }

@@ -68,7 +68,7 @@ fn still_water() -> (hecs::World, usize) {
 pub(super) fn packed(world: &hecs::World, fields: sph_core::pair::Fields) -> Records {
     let mut r = Records::default();
     let mut columns = Columns::default();
-    if fields.contains(DensityGradient::X) {
+    if fields.contains(Field::Slot0) {
         columns
             .insert::<DensityGradient>(Scope::Particles, gradients(world))
             .unwrap();

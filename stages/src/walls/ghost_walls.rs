@@ -359,7 +359,7 @@ impl GhostWalls {
         &self,
         sim: &mut Sim,
         renew: bool,
-        no_slip: Option<&mut [glam::DVec2]>,
+        no_slip: Option<&mut [Vector]>,
     ) -> Result<(), StepError> {
         let images = &self.images[..];
         let Some(fluid) = archetype::<Fluid>(&sim.world) else {

@@ -12,16 +12,17 @@
 //! columns").
 
 use super::record::Field;
+use crate::dim::{Vector, DIM};
 use crate::stage::StepError;
-use glam::DVec2;
 use std::any::TypeId;
 
 /// The type that names a keyed column.
 pub trait ColumnKey: 'static {
     /// The name errors give.
     const NAME: &'static str;
-    /// The record slots it is packed into: one for a scalar (the values' `x`), two for
-    /// a vector (`x`, `y`), among [`Field::SLOTS`].
+    /// The record slots it is packed into: one for a scalar (the values' `x`), one per
+    /// component up to the dimension's for a vector (`x`, `y`[, `z`]), among
+    /// [`Field::SLOTS`].
     const SLOTS: &'static [Field];
 }
 
@@ -43,7 +44,7 @@ struct Entry {
     name: &'static str,
     slots: &'static [Field],
     scope: Scope,
-    values: Vec<DVec2>,
+    values: Vec<Vector>,
 }
 
 /// The keyed columns of the current step (a resource of the sim).
@@ -62,7 +63,7 @@ pub enum ColumnError {
         held: &'static str,
         slot: Field,
     },
-    /// The key names no slot, more than two, or a field that is not a slot; or its
+    /// The key names no slot, more than the dimension's count, or a field that is not a slot; or its
     /// fluid fields are not as many as its slots, or include a slot.
     #[error("the column {name} is declared wrongly: {why}")]
     Declaration {
@@ -85,12 +86,12 @@ impl Columns {
     pub fn insert<K: ColumnKey>(
         &mut self,
         scope: Scope,
-        values: Vec<DVec2>,
+        values: Vec<Vector>,
     ) -> Result<(), ColumnError> {
         let declared = |why| ColumnError::Declaration { name: K::NAME, why };
-        if K::SLOTS.is_empty() || K::SLOTS.len() > 2 {
+        if K::SLOTS.is_empty() || K::SLOTS.len() > DIM {
             return Err(declared(
-                "a column has one slot (a scalar) or two (a vector)",
+                "a column has one slot (a scalar) or one per component of a vector, at most one per dimension",
             ));
         }
         if !K::SLOTS.iter().all(|f| f.is_slot()) {
@@ -133,13 +134,13 @@ impl Columns {
     }
 
     /// Column `K`'s values.
-    pub fn get<K: ColumnKey>(&self) -> Option<&[DVec2]> {
+    pub fn get<K: ColumnKey>(&self) -> Option<&[Vector]> {
         self.find(TypeId::of::<K>()).map(|e| &e.values[..])
     }
 
     /// Column `K`'s values, to change in place (a solve that changes velocities
     /// between passes keeps a velocity column in step).
-    pub fn get_mut<K: ColumnKey>(&mut self) -> Option<&mut Vec<DVec2>> {
+    pub fn get_mut<K: ColumnKey>(&mut self) -> Option<&mut Vec<Vector>> {
         let key = TypeId::of::<K>();
         self.entries
             .iter_mut()
@@ -148,7 +149,7 @@ impl Columns {
     }
 
     /// Removes column `K`, giving its values back (to reuse their buffer).
-    pub fn remove<K: ColumnKey>(&mut self) -> Option<Vec<DVec2>> {
+    pub fn remove<K: ColumnKey>(&mut self) -> Option<Vec<Vector>> {
         let key = TypeId::of::<K>();
         let k = self.entries.iter().position(|e| e.key == key)?;
         Some(self.entries.swap_remove(k).values)
@@ -158,7 +159,7 @@ impl Columns {
     pub fn heap_bytes(&self) -> usize {
         self.entries
             .iter()
-            .map(|e| e.values.capacity() * std::mem::size_of::<DVec2>())
+            .map(|e| e.values.capacity() * std::mem::size_of::<Vector>())
             .sum()
     }
 
@@ -215,8 +216,8 @@ impl Columns {
 #[derive(Clone, Copy)]
 pub(crate) struct SlotSource<'a> {
     /// The column's values (per particle, or per ghost).
-    values: &'a [DVec2],
-    /// 0 for `x`, 1 for `y`.
+    values: &'a [Vector],
+    /// 0 for `x`, 1 for `y`, 2 for `z` (below the key's slot count, at most DIM).
     component: usize,
     /// For a ghosts-only column, the record field the fluid's slot holds.
     fluid: Option<Field>,
@@ -237,10 +238,6 @@ impl SlotSource<'_> {
             Some(f) if j < n_fluid => return own(f),
             Some(_) => self.values[j - n_fluid],
         };
-        if self.component == 0 {
-            v.x
-        } else {
-            v.y
-        }
+        v[self.component]
     }
 }

@@ -6,6 +6,7 @@ use crate::dim::{self, Vector, DIM};
 use crate::kernel::{KernelKind, Wendland};
 use crate::sim::Tait;
 use crate::world::Particles;
+#[cfg(not(feature = "dim3"))]
 use glam::DVec2;
 
 #[derive(Clone)]
@@ -447,7 +448,7 @@ fn keyed_columns_are_packed_into_their_slots() {
 fn a_column_on_another_keys_slot_is_refused() {
     let mut columns = Columns::default();
     columns
-        .insert::<Gradient>(Scope::Particles, vec![DVec2::ONE])
+        .insert::<Gradient>(Scope::Particles, vec![Vector::ONE])
         .unwrap();
     let err = columns
         .insert::<Clashing>(Scope::Particles, vec![])
@@ -462,9 +463,9 @@ fn a_column_on_another_keys_slot_is_refused() {
     );
     assert!(err.to_string().contains("Clashing") && err.to_string().contains("Gradient"));
     columns
-        .insert::<Gradient>(Scope::Particles, vec![DVec2::X; 3])
+        .insert::<Gradient>(Scope::Particles, vec![Vector::X; 3])
         .unwrap();
-    assert_eq!(columns.get::<Gradient>(), Some(&[DVec2::X; 3][..]));
+    assert_eq!(columns.get::<Gradient>(), Some(&[Vector::X; 3][..]));
     assert!(matches!(
         columns.insert::<NotASlot>(Scope::Particles, vec![]),
         Err(ColumnError::Declaration {
@@ -480,7 +481,7 @@ fn a_column_on_another_keys_slot_is_refused() {
         ));
     }
     assert!(!columns.contains::<GhostVelocity>());
-    assert_eq!(columns.remove::<Gradient>(), Some(vec![DVec2::X; 3]));
+    assert_eq!(columns.remove::<Gradient>(), Some(vec![Vector::X; 3]));
     columns
         .insert::<Clashing>(Scope::Particles, vec![])
         .unwrap();
@@ -500,7 +501,7 @@ fn a_missing_or_stale_column_is_refused() {
     assert!(err.to_string().contains("Slot0"), "{err}");
     let mut columns = Columns::default();
     columns
-        .insert::<Gradient>(Scope::Particles, vec![DVec2::ONE; 5])
+        .insert::<Gradient>(Scope::Particles, vec![Vector::ONE; 5])
         .unwrap();
     let err = r
         .pack_with(&particles, fields, &eos(), &columns)
@@ -508,7 +509,7 @@ fn a_missing_or_stale_column_is_refused() {
     assert!(err.to_string().contains("Gradient holds 5 values"), "{err}");
     let mut columns = Columns::default();
     columns
-        .insert::<GhostVelocity>(GHOST_VELOCITY, vec![DVec2::ONE; 2])
+        .insert::<GhostVelocity>(GHOST_VELOCITY, vec![Vector::ONE; 2])
         .unwrap();
     let err = r
         .pack_with(&particles, Fields::of(&[Field::Slot3]), &eos(), &columns)
