@@ -31,7 +31,7 @@ pub struct ViscousDissipation {
 }
 
 /// The renormalised density gradient of every particle, fluid then ghosts (the joint
-/// numbering of the neighbour lists): a keyed column in slots 0 and 1, written each
+/// numbering of the neighbour lists): a keyed column in slots 0 and 1 (and 2 in 3D), written each
 /// step by the momentum stage before its pair sums when its terms include delta-SPH's
 /// diffusion (docs/physics.md, "Density diffusion").
 pub struct DensityGradient;
@@ -49,6 +49,9 @@ impl DensityGradient {
     /// Its components [kg/m^4] in the records, x, y[, z].
     pub const FIELDS: Fields = Fields::of(<Self as ColumnKey>::SLOTS);
 }
+
+// delta-SPH's pair reads one slot per component of x_ij.
+const _: () = assert!(<DensityGradient as ColumnKey>::SLOTS.len() == DIM);
 
 /// Each fluid particle's sum_j m_j W_ij over its neighbours (fluid and ghosts, i
 /// excluded) [kg/m^2], in fluid order, at this step's positions: summed in the

@@ -101,6 +101,7 @@ impl Default for Pitch {
 
 #[cfg(feature = "dim3")]
 impl Pitch {
+    /// The pitch [phi, phi', phi''] [rad, rad/s, rad/s^2], with its k.
     pub fn new(values: [f64; 3]) -> Self {
         let (s, c) = values[0].sin_cos();
         Self {

@@ -122,7 +122,7 @@ pub fn register(registry: &mut StageRegistry) {
                 return Err(sph_core::ParamError::new(
                     "single_velocity",
                     false,
-                    "true in 3D: the wall particles' second velocity for the viscous terms is a two-component column, built in 2D only, so in 3D every term reads the one velocity `slip` and `mirror` set",
+                    "true in 3D: the wall particles' second velocity for the viscous terms is a keyed column in record slots 2 and 3, built in 2D only (in 3D a vector takes three slots, and delta-SPH's gradient holds slot 2), so in 3D every term reads the one velocity `slip` and `mirror` set",
                 ));
             }
             if p.mirror && p.separation {

@@ -2,8 +2,9 @@
 //! from the packed records, beyond the world's components (delta-SPH's density
 //! gradient, the ghosts' no-slip velocities, a plugin's wall normal). A column is
 //! keyed by a type ([`ColumnKey`]), so a stage declares it in its
-//! [`crate::contract::Access`] like any other quantity, and it is packed into one or
-//! two of the records' four column slots ([`Field::SLOTS`]), which its key names.
+//! [`crate::contract::Access`] like any other quantity, and it is packed into as many
+//! of the records' four column slots ([`Field::SLOTS`]) as it has components (one for
+//! a scalar, at most DIM for a vector), which its key names.
 //!
 //! The sim's [`Columns`] resource holds them. It refuses a column whose slots another
 //! key holds, so at any time a slot has one meaning; a term reads its key's slots.

@@ -79,7 +79,8 @@ impl Layouts {
     /// The momentum equation's fields ([`Field::MOMENTUM`]): one 64-byte record.
     pub const MOMENTUM: Layouts = Layouts(1);
     /// The same with a vector column in slots 0 and 1 (the momentum pass with
-    /// delta-SPH's density gradient).
+    /// delta-SPH's density gradient in 2D; in 3D the gradient takes slot 2 as well, so
+    /// its pass finds the offsets at run time).
     pub const GRADIENT: Layouts = Layouts(2);
     /// The density filters' (x, y, rho, m).
     pub const FILTER: Layouts = Layouts(4);

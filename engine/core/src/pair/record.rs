@@ -44,7 +44,8 @@ pub enum Field {
     /// Sound speed c(rho) of the equation of state [m/s].
     Sound,
     /// Keyed column slot 0: a quantity a stage computes, packed as its key says
-    /// ([`super::ColumnKey`]; delta-SPH's density gradient takes slots 0 and 1).
+    /// ([`super::ColumnKey`]; delta-SPH's density gradient takes slots 0 and 1, and
+    /// 2 in 3D).
     Slot0,
     /// Keyed column slot 1.
     Slot1,
