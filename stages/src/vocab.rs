@@ -259,6 +259,38 @@ pub fn viscous_v_ij<L: Lane>(p: &Pair<L>, me: &Me, wall_shear: bool) -> [L; DIM]
     p.velocity_ij(me)
 }
 
+/// With `WallPressure(pair_mirror: true)`: each wall particle's unit normal, zero for
+/// the fluid and for mirrored ghosts, a keyed column of every particle (fluid then
+/// ghosts) in slots 0 and 1 (and 2 in 3D). Continuity and Riemann-solver SPH then meet
+/// a wall particle in the state of Zhang, Hu & Adams's (2017) one-sided Riemann
+/// problem built from i itself: u_R = u_L - 2 ((u_L - v_b) . n) n ([`wall_mirrored_v_ij`]).
+pub struct WallNormal;
+
+impl ColumnKey for WallNormal {
+    const NAME: &'static str = "WallNormal";
+    #[cfg(not(feature = "dim3"))]
+    const SLOTS: &'static [Field] = &[Field::Slot0, Field::Slot1];
+    #[cfg(feature = "dim3")]
+    const SLOTS: &'static [Field] = &[Field::Slot0, Field::Slot1, Field::Slot2];
+}
+
+impl WallNormal {
+    /// Its components in the records.
+    pub const FIELDS: Fields = Fields::of(<Self as ColumnKey>::SLOTS);
+}
+
+/// v_ij with j's velocity, where j is a wall particle (its [`WallNormal`] n is a unit
+/// vector), replaced by i's mirror image across the wall moving at j's velocity v_b:
+/// v_i - v_R = 2 ((v_i - v_b) . n) n; unchanged where n = 0 (the factor n . n is 0 or 1).
+#[inline(always)]
+pub fn wall_mirrored_v_ij<L: Lane>(p: &Pair<L>, me: &Me) -> [L; DIM] {
+    let w = p.velocity_ij(me);
+    let n: [L; DIM] = std::array::from_fn(|k| p.j(<WallNormal as ColumnKey>::SLOTS[k]));
+    let nn = sph_core::pair::dot(n, n);
+    let a = L::splat(2.0) * sph_core::pair::dot(w, n);
+    std::array::from_fn(|k| w[k] + nn * (a * n[k] - w[k]))
+}
+
 /// The divergence-free SPH factors of one step (Bender & Koschier 2017, eq. 11, in
 /// pressure form): for every fluid particle
 /// alpha_i = rho_i^2 / ( |sum_j m_j grad W_ij|^2 + sum_j |m_j grad W_ij|^2 ),

@@ -203,14 +203,14 @@ fn a_scene_of_the_other_dimension_is_refused_with_the_field() {
 /// 2 s) against the measured record, through the run's own comparison
 /// (`reference.md`, the scenario's `reference`), with both pipelines: the water
 /// heights H2 (in front of the box) and H4 (in the reservoir) within the 10 %
-/// normalised mean absolute error over 0-2 s (measured 4.6 % and 1.0 %
+/// normalised mean absolute error over 0-2 s (measured 5.5 % and 1.1 %
 /// weakly-compressible on wall particles, 4.3 % and 1.3 % DFSPH on mirrors), and P1's
-/// arrival (its first 1 kPa) within the 10 % (measured +9.9 % and +5.5 %: the
-/// coarse front reaches the sensor late, +4.4 % at 0.025 m). On wall particles P1's
+/// arrival (its first 1 kPa) within the 10 % (measured +8.1 % and +5.5 %: the
+/// coarse front reaches the sensor late, +3.7 % at 0.025 m). On wall particles P1's
 /// first peak (the largest 1 ms mean within 0.1 s of arrival) is within the 25
-/// % here (measured +17.7 %; on mirrors +633 %), and the wall safeguard acts at most 50
-/// times in 2 s (measured 5; 31,070 on mirrors). Neither holds at finer resolution
-/// (+115 % at 0.025 m, 458 reflections), so this holds the coarse run, not the
+/// % here (measured -11.9 %; on mirrors +633 %), and the wall safeguard acts at most 50
+/// times in 2 s (measured 2; 31,070 on mirrors). The peak does not hold at finer
+/// resolution (+45 % at 0.025 m, +119 % at 0.02 m), so this holds the coarse run, not the
 /// acceptance; DFSPH's peak is a one-step pulse, several times the measured one at
 /// every resolution, and is not held (docs/validation.md, "3D", has both per
 /// resolution).

@@ -40,6 +40,10 @@ pub trait Term: RateTerm + Sized {
     /// `NoSlipVelocity` column; the walls do not slip) instead of their `Vx`, `Vy`. Other terms
     /// ignore it.
     fn wall_shear(&mut self) {}
+    /// For a term that reads the velocity of a pair: meet a fixed wall particle with
+    /// i's own mirror image across its wall (the physics crate's `WallNormal` column;
+    /// `WallPressure(pair_mirror: true)`). Other terms ignore it.
+    fn wall_mirror(&mut self) {}
     /// The pass the term needs before the loop, if any; run once per step however
     /// many terms name the same one.
     const PRE_PASS: Option<PrePass> = None;

@@ -26,7 +26,7 @@ pub fn register(registry: &mut StageRegistry) {
         |_: Params| {
             Ok(ContinuityStage {
                 terms: RateTerms {
-                    continuity: Some(continuity::Continuity),
+                    continuity: Some(continuity::Continuity::default()),
                     ..RateTerms::default()
                 },
                 scratch: Default::default(),

@@ -10,7 +10,9 @@ use crate::terms::{
     artificial_viscosity, plugin_terms, pressure_gradient, term_list_seed, PrePass, RateTerms,
     TermRegistry, TermSpec,
 };
-use crate::vocab::{DiffusionPower, KernelSums, NoSlipVelocity, ViscousDissipation, WallPower};
+use crate::vocab::{
+    DiffusionPower, KernelSums, NoSlipVelocity, ViscousDissipation, WallNormal, WallPower,
+};
 use serde::de::{self, DeserializeSeed, MapAccess, Visitor};
 use serde::{Deserializer, Serialize};
 use sph_core::components::{Acceleration, DensityRate, Fluid, NeighbourCount};
@@ -101,6 +103,7 @@ pub fn register(registry: &mut StageRegistry) {
                 pre_passes: Vec::new(),
                 scratch: Default::default(),
                 wall_shear: false,
+                wall_mirror: false,
                 counts: false,
             })
         },
@@ -119,6 +122,8 @@ pub struct Forces {
     scratch: rates::Scratch,
     /// The viscous terms read the ghosts' no-slip velocities (`NoSlipVelocity`).
     wall_shear: bool,
+    /// The terms meet wall particles with i's mirror image (`WallNormal`).
+    wall_mirror: bool,
     /// The fluid has a `NeighbourCount` column, which this pass fills in while the
     /// lists have a skin (`vocab::NeighbourCountsInPass`).
     counts: bool,
@@ -128,7 +133,13 @@ impl Forces {
     /// The terms for the run, the viscous ones reading the ghosts' no-slip velocities
     /// with `no_slip`.
     fn build_terms(&mut self, sim: &Sim, no_slip: bool) {
-        self.terms = RateTerms::build(&self.params.terms, &sim.constants, no_slip);
+        self.wall_mirror = has_wall_normal(sim);
+        self.terms = RateTerms::build_walls(
+            &self.params.terms,
+            &sim.constants,
+            no_slip,
+            self.wall_mirror,
+        );
         self.plugins = plugin_terms(&self.params.terms, &sim.constants, no_slip);
         self.wall_shear = no_slip;
         self.pre_passes.clear();
@@ -143,6 +154,14 @@ impl Forces {
             }
         }
     }
+}
+
+/// Whether the wall particles meet the fluid with its own mirror image
+/// (`WallPressure(pair_mirror: true)`).
+fn has_wall_normal(sim: &Sim) -> bool {
+    sim.resources
+        .get::<Columns>()
+        .is_some_and(|c| c.contains::<WallNormal>())
 }
 
 /// Whether the walls store the ghosts' no-slip velocities (walls that do not slip).
@@ -177,7 +196,7 @@ impl Stage for Forces {
         // Ghost walls set up after this stage (a pipeline that lists them later) are
         // known only now.
         let no_slip = has_no_slip(sim);
-        if no_slip != self.wall_shear {
+        if no_slip != self.wall_shear || has_wall_normal(sim) != self.wall_mirror {
             self.build_terms(sim, no_slip);
         }
         // The walls' work on the fluid, for the energy budget: in the same pass when
@@ -253,7 +272,8 @@ impl Stage for Forces {
             .writes::<WallPower>()
             .writes::<KernelSums>()
             .uses::<NeighbourCount>()
-            .uses::<NoSlipVelocity>();
+            .uses::<NoSlipVelocity>()
+            .uses::<WallNormal>();
         terms.iter().fold(access, |a, t| t.declare(a))
     }
 }

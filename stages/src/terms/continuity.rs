@@ -2,6 +2,7 @@
 //!   d rho_i/dt = sum_j m_j v_ij . grad_i W_ij.
 
 use super::Term;
+use crate::vocab::{wall_mirrored_v_ij, WallNormal};
 use serde::{Deserialize, Serialize};
 use sph_core::pair::{dot, Field, Fields, Lane, Me, Pair, RateTerm, Rates};
 use sph_core::sim::Constants;
@@ -12,19 +13,28 @@ use sph_core::sim::Constants;
 pub struct Params {}
 
 #[derive(Clone, Copy, Debug, Default)]
-pub struct Continuity;
+pub struct Continuity {
+    /// Meet wall particles with i's mirror image ([`Term::wall_mirror`]).
+    mirror: bool,
+}
 
 impl Term for Continuity {
     const READS: Fields = Fields::of(&Field::VELOCITY);
     type Params = Params;
     fn build(_: &Params, _: &Constants) -> Self {
-        Continuity
+        Continuity { mirror: false }
+    }
+    fn wall_mirror(&mut self) {
+        self.mirror = true;
     }
 }
 
 impl RateTerm for Continuity {
     fn reads(&self) -> Fields {
-        <Self as Term>::READS
+        match self.mirror {
+            true => <Self as Term>::READS.with(WallNormal::FIELDS),
+            false => <Self as Term>::READS,
+        }
     }
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {
@@ -34,7 +44,11 @@ impl RateTerm for Continuity {
     const SYMMETRIC: bool = true;
     #[inline(always)]
     fn pair_both<L: Lane>(&self, me: &Me, p: &Pair<L>, ri: &mut Rates<L>, rj: &mut Rates<L>) {
-        let v_grad = dot(p.velocity_ij(me), p.grad());
+        let v_ij = match self.mirror {
+            true => wall_mirrored_v_ij(p, me),
+            false => p.velocity_ij(me),
+        };
+        let v_grad = dot(v_ij, p.grad());
         ri.drho = ri.drho + p.j(Field::Mass) * v_grad;
         rj.drho = rj.drho + me.lanes::<L>(Field::Mass) * v_grad;
     }

@@ -19,7 +19,7 @@
 
 use super::riemann::states;
 use super::Term;
-use crate::vocab::viscous_v_ij;
+use crate::vocab::{viscous_v_ij, wall_mirrored_v_ij, WallNormal};
 use serde::{Deserialize, Serialize};
 use sph_core::pair::{dot, Field, Fields, Lane, Me, Pair, RateTerm, Rates};
 use sph_core::sim::Constants;
@@ -46,6 +46,8 @@ pub struct RiemannPressure {
     tiny: f64,
     /// v_ij from the ghosts' viscous velocities ([`Term::wall_shear`]).
     shear: bool,
+    /// Meet wall particles with i's mirror image ([`Term::wall_mirror`]).
+    mirror: bool,
 }
 
 impl Term for RiemannPressure {
@@ -68,16 +70,24 @@ impl Term for RiemannPressure {
             eta: p.limiter,
             tiny: 1e-9 * c.h,
             shear: false,
+            mirror: false,
         }
     }
     fn wall_shear(&mut self) {
         self.shear = true;
     }
+    fn wall_mirror(&mut self) {
+        self.mirror = true;
+    }
 }
 
 impl RateTerm for RiemannPressure {
     fn reads(&self) -> Fields {
-        super::with_wall_shear(<Self as Term>::READS, self.shear)
+        let reads = super::with_wall_shear(<Self as Term>::READS, self.shear);
+        match self.mirror {
+            true => reads.with(WallNormal::FIELDS),
+            false => reads,
+        }
     }
     const USES_COEF: bool = true;
     #[inline(always)]
@@ -91,7 +101,10 @@ impl RateTerm for RiemannPressure {
     fn pair_both<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>, rj: &mut Rates<L>) {
         let c = L::splat;
         let s = states(me, p);
-        let w = viscous_v_ij(p, me, self.shear);
+        let w = match self.mirror {
+            true => wall_mirrored_v_ij(p, me),
+            false => viscous_v_ij(p, me, self.shear),
+        };
         // U_ij = v_ij . x_ji / r: positive when the pair approaches.
         let u = (L::zero() - dot(w, p.x_ij())) / p.r.max(c(self.tiny));
         // min(eta max(U, 0), cbar) as -max(-eta max(U, 0), -cbar): lanes have no min.

@@ -6,7 +6,7 @@ use super::diffusion::Params;
 use super::fourtakas::Fourtakas;
 use super::molteni_colagrossi::MolteniColagrossi;
 use super::{RateTerms, Term, TermListError, TermSpec};
-use crate::vocab::{DensityGradient, NoSlipVelocity};
+use crate::vocab::{DensityGradient, NoSlipVelocity, WallNormal};
 use glam::DVec2;
 use sph_core::components::{Density, Fluid, Ghost, Mass, Position, Pressure, Velocity};
 use sph_core::kernel::{Kernel, KernelKind, Wendland};
@@ -1073,5 +1073,77 @@ fn a_lone_particle_keeps_the_rest_density_or_moves_towards_it() {
         );
         let (from, to) = (carried.min(RHO0), carried.max(RHO0));
         assert!(from <= got && got <= to, "{carried}: {got}");
+    }
+}
+
+/// With `WallPressure(pair_mirror: true)` continuity and Riemann-solver SPH meet a wall
+/// particle j (a unit `WallNormal` n) with i's own mirror image across j's wall,
+/// v_i - 2 ((v_i - v_j) . n) n (`vocab::wall_mirrored_v_ij`), and a fluid particle
+/// (n = 0) as it is: for each i, the sums equal the plain terms' on a copy of the
+/// world whose wall particles move with that image (relative 1e-12: round-off), on
+/// every instruction set, with the wall tilted so that both of n's components count.
+#[test]
+fn the_pair_mirror_meets_a_wall_particle_with_the_fluid_particles_own_image() {
+    let world = jittered_world();
+    let n = DVec2::new(0.6, 0.8);
+    let fluid = world.query::<&Fluid>().iter().count();
+    let ghosts = world.query::<&Ghost>().iter().count();
+    let specs: Vec<TermSpec> = sph_core::registry::ron_options()
+        .from_str("[RiemannPressure(limiter: 3.0), Continuity(), RiemannDiffusion()]")
+        .unwrap();
+    let mirror = RateTerms::build_walls(&specs, &constants(), false, true);
+    let plain = RateTerms::build(&specs, &constants(), false);
+    assert!(mirror.reads().contains(Field::Slot0) && !plain.reads().contains(Field::Slot0));
+    let mut columns = Columns::default();
+    let normals = (0..fluid + ghosts)
+        .map(|j| if j < fluid { DVec2::ZERO } else { n })
+        .collect();
+    columns
+        .insert::<WallNormal>(Scope::Particles, normals)
+        .unwrap();
+    let mut r = Records::default();
+    r.pack_with(
+        &Particles::of(&world).unwrap(),
+        mirror.reads(),
+        &constants().eos,
+        &columns,
+    )
+    .unwrap();
+    let k = Wendland::new(H);
+    let as_is = packed(&world, plain.reads());
+    let (mirror, plain) = (EquationsOfMotion(mirror), EquationsOfMotion(plain));
+    for i in [11, 12, 70] {
+        let v_i = DVec2::new(r.get(i, Field::Vx), r.get(i, Field::Vy));
+        let mut imaged = jittered_world();
+        for (_, v) in imaged.query_mut::<(&Ghost, &mut Velocity)>() {
+            v.0 = v_i - 2.0 * (v_i - v.0).dot(n) * n;
+        }
+        let on_imaged = packed(&imaged, plain.reads());
+        let js = neighbours(&r, i, k.support());
+        assert!(i == 70 || js.iter().any(|&j| j as usize >= fluid));
+        let want = Pass::with_isa(&plain, k, &on_imaged, Isa::SCALAR)
+            .unwrap()
+            .sum(i, &js);
+        for isa in std::iter::once(Isa::SCALAR).chain(Isa::available()) {
+            let s = Pass::with_isa(&mirror, k, &r, isa).unwrap().sum(i, &js);
+            let close = |a: f64, b: f64, scale: f64| (a - b).abs() <= 1e-12 * scale.max(1e-300);
+            let scale = want.acc.length();
+            assert!(
+                close(s.acc.x, want.acc.x, scale)
+                    && close(s.acc.y, want.acc.y, scale)
+                    && close(s.drho, want.drho, want.drho.abs())
+                    && close(s.power, want.power, want.power.abs()),
+                "particle {i} on {}: {s:?} against {want:?}",
+                isa.name()
+            );
+        }
+        // Next to the wall the image matters: the wall particles' own velocities give
+        // other sums.
+        let plain_sums = Pass::with_isa(&plain, k, &as_is, Isa::SCALAR)
+            .unwrap()
+            .sum(i, &js);
+        if i != 70 {
+            assert!((plain_sums.drho - want.drho).abs() > 1e-6 * want.drho.abs());
+        }
     }
 }

@@ -38,14 +38,14 @@
 //! the pressure is the largest carried fluid pressure instead of the mean, and with
 //! `single_velocity: true` every term reads the viscous velocity (their docs below).
 
-use crate::vocab::{NoSlipSigns, NoSlipVelocity};
+use crate::vocab::{NoSlipSigns, NoSlipVelocity, WallNormal};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sph_core::components::{Density, Fluid, Ghost, MirrorWall, Position, Pressure, Velocity};
 use sph_core::contract::Access;
 use sph_core::dim::Vector;
 use sph_core::kernel::Kernel;
-use sph_core::pair::Columns;
+use sph_core::pair::{Columns, Scope};
 use sph_core::sim::Sim;
 use sph_core::stage::{SetupError, Stage, StepError};
 use sph_core::vocab::{require_neighbours, Neighbours, WallPose};
@@ -103,6 +103,14 @@ pub struct Params {
     /// wall then pushes every fluid particle near it at least as hard as the hardest
     /// pushed of them would be by its own mirror image. Default false.
     pub largest: bool,
+    /// Meet each fluid particle i, in continuity and Riemann-solver SPH, with its own
+    /// mirror image across the wall particle's wall, v_i - 2 ((v_i - v_b) . n) n (the
+    /// wall state of Zhang, Hu & Adams's 2017 one-sided Riemann problem built pair by
+    /// pair, as SPHinXsys's wall has it), instead of the mirror of the nearby fluid's
+    /// mean velocity: the wall particles keep their wall's velocity v_b and carry
+    /// their normal in a keyed column (`WallNormal`). With `single_velocity`, not
+    /// with `mirror` or `separation`. Default false.
+    pub pair_mirror: bool,
 }
 
 pub fn register(registry: &mut StageRegistry) {
@@ -132,7 +140,17 @@ pub fn register(registry: &mut StageRegistry) {
                     "false when `separation` is true: the two set the wall particles' normal velocity differently",
                 ));
             }
+            if p.pair_mirror
+                && (p.mirror || p.separation || !p.single_velocity || p.slip != Slip::FreeSlip)
+            {
+                return Err(sph_core::ParamError::new(
+                    "pair_mirror",
+                    true,
+                    "false unless `single_velocity` is true, `slip` is FreeSlip and `mirror` and `separation` are false: each pair's image sets the wall's velocity itself, free of shear",
+                ));
+            }
             Ok(WallPressure {
+                pair_mirror: p.pair_mirror,
                 slip: p.slip,
                 separation: p.separation,
                 one_sided: p.one_sided,
@@ -173,6 +191,7 @@ pub struct WallPressure {
     no_pull: bool,
     single_velocity: bool,
     largest: bool,
+    pair_mirror: bool,
     sums: Vec<Sums>,
     /// g - a_w per ghost, for the one-sided sums (zero elsewhere); kept between
     /// steps only to reuse its allocation.
@@ -197,6 +216,12 @@ impl Stage for WallPressure {
     fn setup(&mut self, sim: &mut Sim) -> Result<(), SetupError> {
         require_neighbours(sim, "wall_pressure")?;
         sim.resources.insert(NoSlipSigns::default());
+        if self.pair_mirror {
+            sim.resources
+                .get_or_default::<Columns>()
+                .insert::<WallNormal>(Scope::Particles, Vec::new())
+                .map_err(|e| SetupError::new("wall_pressure", e.to_string()))?;
+        }
         if !self.single_velocity {
             sim.resources
                 .get_or_default::<Columns>()
@@ -372,6 +397,16 @@ impl Stage for WallPressure {
         signs.0.clear();
         signs.0.resize(gv.len(), 0.0);
         let rest = eos.density(0.0);
+        let mut normals = self.pair_mirror.then(|| {
+            let mut column = sim
+                .resources
+                .get_or_default::<Columns>()
+                .remove::<WallNormal>()
+                .unwrap_or_default();
+            column.clear();
+            column.resize(n + gv.len(), Vector::ZERO);
+            column
+        });
         for (k, s) in self.sums.iter().enumerate() {
             if !gs[k].is_wall_particle() {
                 continue;
@@ -400,6 +435,12 @@ impl Stage for WallPressure {
                 Slip::WallVelocity => v_b,
             };
             let n = wall.normal();
+            if let Some(normals) = normals.as_mut() {
+                normals[fx.len() + k] = n;
+                gv[k].0 = v_b;
+                gr[k].0 = eos.density(gp[k].0);
+                continue;
+            }
             if self.mirror {
                 let away = (u - v_b).dot(n);
                 gv[k].0 = v_b - away * n;
@@ -412,6 +453,11 @@ impl Stage for WallPressure {
                 None => gv[k].0 = visc,
             }
             gr[k].0 = eos.density(gp[k].0);
+        }
+        if let Some(normals) = normals {
+            sim.resources
+                .get_or_default::<Columns>()
+                .insert::<WallNormal>(Scope::Particles, normals)?;
         }
         #[cfg(not(feature = "dim3"))]
         if let Some(viscous) = viscous {
@@ -436,6 +482,7 @@ impl Stage for WallPressure {
             .updates::<Ghost>()
             .writes::<NoSlipVelocity>()
             .writes::<NoSlipSigns>()
+            .writes::<WallNormal>()
     }
 }
 
@@ -780,6 +827,59 @@ mod tests {
         assert!(two.len() >= 5 && column);
         for v in two {
             assert!((v - DVec2::new(0.0, -u.y)).length() < 1e-12, "{v}");
+        }
+    }
+
+    /// With `pair_mirror` every wall particle near the fluid keeps its wall's velocity
+    /// (the fixed box's: 0) and carries its wall's unit normal in the `WallNormal`
+    /// column, the fluid and the wall particles beyond its reach a zero there (the
+    /// terms then meet only wall particles with i's image); the other forms' mirrored
+    /// velocity is not written, and the form is refused beside the settings that set
+    /// the wall's velocity otherwise.
+    #[test]
+    fn the_pair_mirror_gives_the_wall_particles_their_normals() {
+        let u = DVec2::new(0.3, -0.2);
+        let sim = row_on_the_floor(|_| 100.0, u, "(single_velocity: true, pair_mirror: true)");
+        let ghost = archetype::<Ghost>(&sim.world).unwrap();
+        let (x, v, p) = (
+            column::<Position>(ghost).unwrap(),
+            column::<Velocity>(ghost).unwrap(),
+            column::<Pressure>(ghost).unwrap(),
+        );
+        let fluid = archetype::<Fluid>(&sim.world).unwrap().len() as usize;
+        let normals = sim
+            .resources
+            .get::<Columns>()
+            .unwrap()
+            .get::<WallNormal>()
+            .unwrap();
+        assert_eq!(normals.len(), fluid + x.len());
+        assert!(normals[..fluid].iter().all(|n| *n == DVec2::ZERO));
+        let mut floor = 0;
+        for k in 0..x.len() {
+            let n = normals[fluid + k];
+            if p[k].0 > 0.0 && x[k].0.y < 0.0 && x[k].0.x > 0.0 {
+                floor += 1;
+                assert_eq!((n, v[k].0), (DVec2::Y, DVec2::ZERO), "at {}", x[k].0);
+            } else if p[k].0 == 0.0 {
+                assert_eq!(n, DVec2::ZERO, "at {}", x[k].0);
+            }
+        }
+        assert!(floor >= 5, "{floor} floor particles near the fluid");
+        for refused in [
+            "(single_velocity: false, pair_mirror: true)",
+            "(single_velocity: true, mirror: true, pair_mirror: true)",
+            "(single_velocity: true, slip: NoSlip, pair_mirror: true)",
+            "(single_velocity: false, separation: true, pair_mirror: true)",
+        ] {
+            let registry = crate::standard_registry();
+            let mut de = ron::Deserializer::from_str(refused).unwrap();
+            let mut erased = <dyn erased_serde::Deserializer>::erase(&mut de);
+            let err = match registry.build("wall_pressure", &mut erased).unwrap() {
+                Ok(_) => panic!("{refused} accepted"),
+                Err(e) => e.to_string(),
+            };
+            assert!(err.contains("pair_mirror"), "{refused}: {err}");
         }
     }
 

@@ -43,7 +43,7 @@ pub(crate) fn power(
     plugins: &[PluginTerm],
 ) -> Result<f64, StepError> {
     let terms = RateTerms {
-        continuity: Some(continuity::Continuity),
+        continuity: Some(continuity::Continuity::default()),
         ..*terms
     };
     match plugins.is_empty() {

@@ -78,9 +78,9 @@ impl Layouts {
     pub const NONE: Layouts = Layouts(0);
     /// The momentum equation's fields ([`Field::MOMENTUM`]): one 64-byte record.
     pub const MOMENTUM: Layouts = Layouts(1);
-    /// The same with a vector column in slots 0 and 1 (the momentum pass with
-    /// delta-SPH's density gradient in 2D; in 3D the gradient takes slot 2 as well, so
-    /// its pass finds the offsets at run time).
+    /// The same with a vector column in the first DIM slots (0 and 1 in 2D, 0-2 in
+    /// 3D): the momentum pass with delta-SPH's density gradient, or with the wall
+    /// particles' normals (`WallPressure(pair_mirror: true)`).
     pub const GRADIENT: Layouts = Layouts(2);
     /// The density filters' (x, y, rho, m).
     pub const FILTER: Layouts = Layouts(4);
@@ -92,8 +92,13 @@ impl Layouts {
     pub const SHEAR: Layouts = Layouts(8);
 
     const MOMENTUM_BITS: u16 = Fields::of(&Field::MOMENTUM).bits();
+    #[cfg(not(feature = "dim3"))]
     const GRADIENT_BITS: u16 = Fields::of(&Field::MOMENTUM)
         .with(Fields::of(&[Field::Slot0, Field::Slot1]))
+        .bits();
+    #[cfg(feature = "dim3")]
+    const GRADIENT_BITS: u16 = Fields::of(&Field::MOMENTUM)
+        .with(Fields::of(&[Field::Slot0, Field::Slot1, Field::Slot2]))
         .bits();
     const FILTER_BITS: u16 = Fields::GEOMETRY.with(Fields::of(&[Field::Rho])).bits();
     const SHEAR_BITS: u16 = Fields::of(&Field::MOMENTUM)
@@ -114,7 +119,7 @@ impl Layouts {
 
     /// The field set to pack for a pass that reads `reads`: the smallest compiled
     /// layout that holds them (the density filters', the momentum record, then the
-    /// momentum record with a vector column in slots 0-1, then in slots 2-3), so that the pass runs a loop with
+    /// momentum record with a vector column in the first DIM slots, then in slots 2-3), so that the pass runs a loop with
     /// offsets known when compiled (an artificial viscosity alone, say, reads the
     /// momentum record less p / rho^2; packing the one field more costs far less than
     /// finding the offsets at run time); `reads` with the geometry where no layout

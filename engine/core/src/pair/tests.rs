@@ -214,7 +214,11 @@ fn layouts_name_the_four_compiled_field_sets() {
     let rho = Fields::of(&[Field::Rho]);
     assert_eq!(Layouts::of(rho), Layouts::FILTER);
     assert_eq!(Layouts::of(Fields::of(&Field::MOMENTUM)), Layouts::MOMENTUM);
+    // A vector column in the first DIM slots.
+    #[cfg(not(feature = "dim3"))]
     let slots = Fields::of(&[Field::Slot0, Field::Slot1]);
+    #[cfg(feature = "dim3")]
+    let slots = Fields::of(&[Field::Slot0, Field::Slot1, Field::Slot2]);
     assert_eq!(
         Layouts::of(Fields::of(&Field::MOMENTUM).with(slots)),
         Layouts::GRADIENT
