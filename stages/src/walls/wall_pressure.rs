@@ -236,6 +236,15 @@ impl Stage for WallPressure {
             archetype::<Fluid>(&sim.world),
             archetype::<Ghost>(&sim.world),
         ) else {
+            // No wall particle meets any fluid: every normal is zero.
+            if self.pair_mirror {
+                let count = |a: Option<&hecs::Archetype>| a.map_or(0, |a| a.len() as usize);
+                let all =
+                    count(archetype::<Fluid>(&sim.world)) + count(archetype::<Ghost>(&sim.world));
+                sim.resources
+                    .get_or_default::<Columns>()
+                    .insert::<WallNormal>(Scope::Particles, vec![Vector::ZERO; all])?;
+            }
             return Ok(());
         };
         let Some(nb) = sim.resources.get::<Neighbours>() else {
@@ -881,6 +890,40 @@ mod tests {
             };
             assert!(err.contains("pair_mirror"), "{refused}: {err}");
         }
+    }
+
+    /// With `pair_mirror` and no wall particle at all, the normals are a zero for
+    /// each fluid particle, so the terms read every pair as a fluid pair.
+    #[test]
+    fn the_pair_mirror_without_walls_gives_zero_normals() {
+        let mut world = hecs::World::new();
+        for k in 0..3 {
+            world.spawn((
+                Fluid,
+                Position(DVec2::new(0.1 + 0.01 * k as f64, 0.1)),
+                Velocity(DVec2::ZERO),
+                Density(1000.0),
+                Pressure(0.0),
+                Mass(0.1),
+            ));
+        }
+        let sim = crate::testing::after_one_step(
+            world,
+            &[
+                ("neighbour_grid", "()"),
+                (
+                    "wall_pressure",
+                    "(single_velocity: true, pair_mirror: true)",
+                ),
+            ],
+        );
+        let normals = sim
+            .resources
+            .get::<Columns>()
+            .unwrap()
+            .get::<WallNormal>()
+            .unwrap();
+        assert_eq!(normals, &[DVec2::ZERO; 3]);
     }
 
     /// With `largest` a wall particle's pressure is the largest over the fluid within its
