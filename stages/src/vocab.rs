@@ -279,6 +279,14 @@ impl WallNormal {
     pub const FIELDS: Fields = Fields::of(<Self as ColumnKey>::SLOTS);
 }
 
+/// Whether the wall particles meet the fluid with its own mirror image this run (the
+/// [`WallNormal`] column is stored: `WallPressure(pair_mirror: true)`).
+pub fn wall_mirror_in(sim: &Sim) -> bool {
+    sim.resources
+        .get::<sph_core::pair::Columns>()
+        .is_some_and(|c| c.contains::<WallNormal>())
+}
+
 /// v_ij with j's velocity, where j is a wall particle (its [`WallNormal`] n is a unit
 /// vector), replaced by i's mirror image across the wall moving at j's velocity v_b:
 /// v_i - v_R = 2 ((v_i - v_b) . n) n; unchanged where n = 0 (the factor n . n is 0 or 1).

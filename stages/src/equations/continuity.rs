@@ -4,7 +4,8 @@
 //! instead (one pass fewer), with the same result bit for bit.
 
 use crate::rates::{self, Outputs};
-use crate::terms::{continuity, RateTerms};
+use crate::terms::{continuity, RateTerms, Term};
+use crate::vocab::{wall_mirror_in, WallNormal};
 use serde::{Deserialize, Serialize};
 use sph_core::components::{DensityRate, Fluid};
 use sph_core::contract::Access;
@@ -61,10 +62,19 @@ impl Stage for ContinuityStage {
             counts: false,
             once: rates::Pairs::Auto.once(),
         };
+        // With the pair mirror, continuity meets the wall particles as it does in
+        // `Forces`.
+        let mut continuity = continuity::Continuity::default();
+        if wall_mirror_in(sim) {
+            continuity.wall_mirror();
+        }
+        self.terms.continuity = Some(continuity);
         rates::run(sim, &self.terms, out, &mut self.scratch, None).map(|_| ())
     }
 
     fn access(&self) -> Access {
-        rates::declare_reads(Access::new(), self.terms.reads()).writes::<DensityRate>()
+        rates::declare_reads(Access::new(), self.terms.reads())
+            .writes::<DensityRate>()
+            .uses::<WallNormal>()
     }
 }

@@ -11,7 +11,8 @@ use crate::terms::{
     TermRegistry, TermSpec,
 };
 use crate::vocab::{
-    DiffusionPower, KernelSums, NoSlipVelocity, ViscousDissipation, WallNormal, WallPower,
+    wall_mirror_in, DiffusionPower, KernelSums, NoSlipVelocity, ViscousDissipation, WallNormal,
+    WallPower,
 };
 use serde::de::{self, DeserializeSeed, MapAccess, Visitor};
 use serde::{Deserializer, Serialize};
@@ -133,7 +134,7 @@ impl Forces {
     /// The terms for the run, the viscous ones reading the ghosts' no-slip velocities
     /// with `no_slip`.
     fn build_terms(&mut self, sim: &Sim, no_slip: bool) {
-        self.wall_mirror = has_wall_normal(sim);
+        self.wall_mirror = wall_mirror_in(sim);
         self.terms = RateTerms::build_walls(
             &self.params.terms,
             &sim.constants,
@@ -154,14 +155,6 @@ impl Forces {
             }
         }
     }
-}
-
-/// Whether the wall particles meet the fluid with its own mirror image
-/// (`WallPressure(pair_mirror: true)`).
-fn has_wall_normal(sim: &Sim) -> bool {
-    sim.resources
-        .get::<Columns>()
-        .is_some_and(|c| c.contains::<WallNormal>())
 }
 
 /// Whether the walls store the ghosts' no-slip velocities (walls that do not slip).
@@ -196,7 +189,7 @@ impl Stage for Forces {
         // Ghost walls set up after this stage (a pipeline that lists them later) are
         // known only now.
         let no_slip = has_no_slip(sim);
-        if no_slip != self.wall_shear || has_wall_normal(sim) != self.wall_mirror {
+        if no_slip != self.wall_shear || wall_mirror_in(sim) != self.wall_mirror {
             self.build_terms(sim, no_slip);
         }
         // The walls' work on the fluid, for the energy budget: in the same pass when

@@ -926,6 +926,54 @@ mod tests {
         assert_eq!(normals, &[DVec2::ZERO; 3]);
     }
 
+    /// With `pair_mirror` the `Continuity` stage (a pass of its own) sums what
+    /// `Forces(terms: [Continuity()])` sums, bit for bit, and both differ from the
+    /// sums against the wall particles' own velocity: the stage reads the image too.
+    #[test]
+    fn the_continuity_stage_reads_the_pair_mirror_as_forces_does() {
+        use sph_core::components::DensityRate;
+        let rates = |wall: &str, pass: (&str, &str)| {
+            let sim = crate::testing::after_one_step(
+                {
+                    let mut world = hecs::World::new();
+                    crate::testing::closed_box(&mut world, 0.2, 0.2);
+                    for k in 0..5 {
+                        world.spawn((
+                            Fluid,
+                            Position(DVec2::new(0.08 + 0.01 * k as f64, 0.005)),
+                            Velocity(DVec2::new(0.1 * k as f64, -0.2 - 0.05 * k as f64)),
+                            Density(1000.0),
+                            Pressure(100.0),
+                            Mass(0.1),
+                        ));
+                    }
+                    world
+                },
+                &[
+                    ("wall_particles", "()"),
+                    ("neighbour_grid", "()"),
+                    ("wall_pressure", wall),
+                    pass,
+                ],
+            );
+            let fluid = archetype::<Fluid>(&sim.world).unwrap();
+            let rate = column::<DensityRate>(fluid).unwrap();
+            rate.iter().map(|r| r.0).collect::<Vec<f64>>()
+        };
+        let pair = "(single_velocity: true, pair_mirror: true)";
+        let stage = rates(pair, ("continuity", "()"));
+        let forces = rates(pair, ("forces", "(terms: [Continuity()])"));
+        let own = rates("(single_velocity: true)", ("continuity", "()"));
+        assert_eq!(
+            stage.iter().map(|r| r.to_bits()).collect::<Vec<_>>(),
+            forces.iter().map(|r| r.to_bits()).collect::<Vec<_>>()
+        );
+        assert!(stage
+            .iter()
+            .zip(&own)
+            .all(|(a, b)| (a - b).abs() > 1e-6 * b.abs()));
+    }
+
     /// With `largest` a wall particle's pressure is the largest over the fluid within its
     /// support of p_f + rho_f g . (x_w - x_f) (a fixed box: a_w = 0), summed here by
     /// hand; a wall particle with no fluid near keeps 0.
