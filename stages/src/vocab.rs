@@ -289,10 +289,14 @@ pub fn wall_mirror_in(sim: &Sim) -> bool {
 
 /// v_ij with j's velocity, where j is a wall particle (its [`WallNormal`] n is a unit
 /// vector), replaced by i's mirror image across the wall moving at j's velocity v_b:
-/// v_i - v_R = 2 ((v_i - v_b) . n) n; unchanged where n = 0 (the factor n . n is 0 or 1).
+/// v_i - v_R = 2 ((v_i - v_b) . n) n; unchanged where n = 0 (the factor n . n is 0 or 1),
+/// and for a group of fluid neighbours not computed at all ([`Pair::fluid_only`]).
 #[inline(always)]
 pub fn wall_mirrored_v_ij<L: Lane>(p: &Pair<L>, me: &Me) -> [L; DIM] {
     let w = p.velocity_ij(me);
+    if p.fluid_only() {
+        return w;
+    }
     let n: [L; DIM] = std::array::from_fn(|k| p.j(<WallNormal as ColumnKey>::SLOTS[k]));
     let nn = sph_core::pair::dot(n, n);
     let a = L::splat(2.0) * sph_core::pair::dot(w, n);

@@ -4,8 +4,8 @@
 //! instead (one pass fewer), with the same result bit for bit.
 
 use crate::rates::{self, Outputs};
-use crate::terms::{continuity, RateTerms, Term};
-use crate::vocab::{wall_mirror_in, WallNormal};
+use crate::terms::{continuity, RateTerms};
+use crate::vocab::WallNormal;
 use serde::{Deserialize, Serialize};
 use sph_core::components::{DensityRate, Fluid};
 use sph_core::contract::Access;
@@ -64,11 +64,7 @@ impl Stage for ContinuityStage {
         };
         // With the pair mirror, continuity meets the wall particles as it does in
         // `Forces`.
-        let mut continuity = continuity::Continuity::default();
-        if wall_mirror_in(sim) {
-            continuity.wall_mirror();
-        }
-        self.terms.continuity = Some(continuity);
+        self.terms.continuity = Some(continuity::Continuity::for_walls(sim));
         rates::run(sim, &self.terms, out, &mut self.scratch, None).map(|_| ())
     }
 

@@ -2,10 +2,10 @@
 //!   d rho_i/dt = sum_j m_j v_ij . grad_i W_ij.
 
 use super::Term;
-use crate::vocab::{wall_mirrored_v_ij, WallNormal};
+use crate::vocab::{wall_mirror_in, wall_mirrored_v_ij};
 use serde::{Deserialize, Serialize};
 use sph_core::pair::{dot, Field, Fields, Lane, Me, Pair, RateTerm, Rates};
-use sph_core::sim::Constants;
+use sph_core::sim::{Constants, Sim};
 
 /// `Continuity()`: no parameters.
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
@@ -16,6 +16,17 @@ pub struct Params {}
 pub struct Continuity {
     /// Meet wall particles with i's mirror image ([`Term::wall_mirror`]).
     mirror: bool,
+}
+
+impl Continuity {
+    /// Continuity as this run's walls need it: meeting the wall particles with i's
+    /// mirror image where `WallPressure(pair_mirror: true)` stores their normals
+    /// ([`wall_mirror_in`]), as `Forces` does.
+    pub fn for_walls(sim: &Sim) -> Self {
+        Continuity {
+            mirror: wall_mirror_in(sim),
+        }
+    }
 }
 
 impl Term for Continuity {
@@ -31,10 +42,7 @@ impl Term for Continuity {
 
 impl RateTerm for Continuity {
     fn reads(&self) -> Fields {
-        match self.mirror {
-            true => <Self as Term>::READS.with(WallNormal::FIELDS),
-            false => <Self as Term>::READS,
-        }
+        super::with_wall_mirror(<Self as Term>::READS, self.mirror)
     }
     #[inline(always)]
     fn pair<L: Lane>(&self, me: &Me, p: &Pair<L>, r: &mut Rates<L>) {

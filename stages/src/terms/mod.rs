@@ -26,9 +26,7 @@ pub mod riemann_diffusion;
 pub mod riemann_pressure;
 pub mod shepard;
 
-use crate::vocab::NoSlipVelocity;
-#[cfg(feature = "dim3")]
-use crate::vocab::WallNormal;
+use crate::vocab::{NoSlipVelocity, WallNormal};
 use serde::de::{self, DeserializeSeed, EnumAccess, VariantAccess, Visitor};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use sph_core::contract::Access;
@@ -53,6 +51,15 @@ pub(crate) const fn set_of(list: &[TermBit]) -> u16 {
 pub(crate) fn with_wall_shear(base: Fields, shear: bool) -> Fields {
     match shear {
         true => base.with(NoSlipVelocity::FIELDS),
+        false => base,
+    }
+}
+
+/// `base` with the wall particles' normals, for a term that meets them with i's own
+/// mirror image ([`Term::wall_mirror`], [`crate::vocab::wall_mirrored_v_ij`]).
+pub(crate) const fn with_wall_mirror(base: Fields, mirror: bool) -> Fields {
+    match mirror {
+        true => base.with(WallNormal::FIELDS),
         false => base,
     }
 }
@@ -282,7 +289,7 @@ macro_rules! rate_terms {
                 #[cfg(feature = "dim3")]
                 let layouts = match SET & (1 << TermBit::RiemannPressure as u16) {
                     0 => layouts,
-                    _ => layouts.with(Layouts::of(reads.with(WallNormal::FIELDS))),
+                    _ => layouts.with(Layouts::of(with_wall_mirror(reads, true))),
                 };
                 layouts
             };

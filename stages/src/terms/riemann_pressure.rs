@@ -19,7 +19,7 @@
 
 use super::riemann::states;
 use super::Term;
-use crate::vocab::{viscous_v_ij, wall_mirrored_v_ij, WallNormal};
+use crate::vocab::{viscous_v_ij, wall_mirrored_v_ij};
 use serde::{Deserialize, Serialize};
 use sph_core::pair::{dot, Field, Fields, Lane, Me, Pair, RateTerm, Rates};
 use sph_core::sim::Constants;
@@ -84,10 +84,7 @@ impl Term for RiemannPressure {
 impl RateTerm for RiemannPressure {
     fn reads(&self) -> Fields {
         let reads = super::with_wall_shear(<Self as Term>::READS, self.shear);
-        match self.mirror {
-            true => reads.with(WallNormal::FIELDS),
-            false => reads,
-        }
+        super::with_wall_mirror(reads, self.mirror)
     }
     const USES_COEF: bool = true;
     #[inline(always)]

@@ -392,9 +392,7 @@ impl Stage for WallPressure {
             let mut column = sim
                 .resources
                 .get_or_default::<Columns>()
-                .remove::<NoSlipVelocity>()
-                .unwrap_or_default();
-            column.clear();
+                .take_emptied::<NoSlipVelocity>();
             column.extend(gv.iter().map(|v| v.0));
             column
         });
@@ -410,9 +408,7 @@ impl Stage for WallPressure {
             let mut column = sim
                 .resources
                 .get_or_default::<Columns>()
-                .remove::<WallNormal>()
-                .unwrap_or_default();
-            column.clear();
+                .take_emptied::<WallNormal>();
             column.resize(n + gv.len(), Vector::ZERO);
             column
         });

@@ -21,7 +21,7 @@
 //! `Continuity()` stage sums the density rate) [`power`] runs the terms with continuity
 //! added over the ghost neighbours alone.
 
-use crate::terms::{continuity, RateTerms, Term};
+use crate::terms::{continuity, RateTerms};
 use sph_core::components::{Density, Mass, Velocity};
 use sph_core::dim::Vector;
 use sph_core::pair::{
@@ -43,12 +43,8 @@ pub(crate) fn power(
     plugins: &[PluginTerm],
 ) -> Result<f64, StepError> {
     // Continuity as the density rate read it: with the pair mirror, the image.
-    let mut continuity = continuity::Continuity::default();
-    if crate::vocab::wall_mirror_in(sim) {
-        continuity.wall_mirror();
-    }
     let terms = RateTerms {
-        continuity: Some(continuity),
+        continuity: Some(continuity::Continuity::for_walls(sim)),
         ..*terms
     };
     match plugins.is_empty() {

@@ -156,6 +156,15 @@ impl Columns {
         Some(self.entries.swap_remove(k).values)
     }
 
+    /// Removes column `K` and gives its buffer back emptied, to be filled again and
+    /// stored (a new empty one where `K` was not stored): a stage that writes a column
+    /// each step keeps one allocation.
+    pub fn take_emptied<K: ColumnKey>(&mut self) -> Vec<Vector> {
+        let mut values = self.remove::<K>().unwrap_or_default();
+        values.clear();
+        values
+    }
+
     /// Bytes held, for memory accounting.
     pub fn heap_bytes(&self) -> usize {
         self.entries

@@ -265,6 +265,7 @@ pub struct Pair<L: Lane> {
     #[cfg(feature = "dim3")]
     pub gz: L,
     fields: [L; Field::COUNT],
+    fluid_only: bool,
 }
 
 impl<L: Lane> Pair<L> {
@@ -273,6 +274,15 @@ impl<L: Lane> Pair<L> {
     #[inline(always)]
     pub fn j(&self, f: Field) -> L {
         self.fields[f as usize]
+    }
+
+    /// True when every neighbour of the group is a fluid particle and the records
+    /// hold a keyed column that is zero for the whole fluid ([`Records::fluid_zero`]),
+    /// so that its slots read 0 in every lane; false says nothing. A term whose work
+    /// on such a column vanishes for the fluid may skip it.
+    #[inline(always)]
+    pub fn fluid_only(&self) -> bool {
+        self.fluid_only
     }
 
     /// The relative velocity v_ij = v_i - v_j (the term must read `Vx` and `Vy`).
@@ -673,8 +683,18 @@ impl<'a, T: PairTerm, K: Kernel> Pass<'a, T, K> {
                 pad_record[offsets[f]] = pad[f];
             });
         }
+        // Slots every fluid record holds as +0.0, as does i's padding: a group of fluid
+        // neighbours leaves them at zero without gathering them (the wall particles'
+        // normals, say, read by a few terms, zero for the fluid).
+        let mut skip = [false; Field::COUNT];
+        each_field!(|f| {
+            skip[f] =
+                wanted[f] && rec.fluid_zero().contains(Field::ALL[f]) && pad[f].to_bits() == 0;
+        });
+        let (skipping, n_fluid) = (skip.contains(&true), rec.n_fluid());
         let mut acc = term.zero::<L>();
         for js in neighbours.chunks(L::WIDTH) {
+            let fluid_only = skipping && (js.iter().fold(0, |a, &j| a.max(j)) as usize) < n_fluid;
             let mut fields = [L::zero(); Field::COUNT];
             // SAFETY: L's instructions exist (caller); `index` and `records8` check
             // every index against `len`; the gathers read records of this buffer at
@@ -688,7 +708,7 @@ impl<'a, T: PairTerm, K: Kernel> Pass<'a, T, K> {
                     });
                 } else {
                     let index = L::index(js, stride, len);
-                    each_field!(|f| if wanted[f] {
+                    each_field!(|f| if wanted[f] && !(fluid_only && skip[f]) {
                         fields[f] = L::gather(index, base, offsets[f], pad[f]);
                     });
                 }
@@ -718,6 +738,7 @@ impl<'a, T: PairTerm, K: Kernel> Pass<'a, T, K> {
                 #[cfg(feature = "dim3")]
                 gz: dz * f,
                 fields,
+                fluid_only,
             };
             if let (true, Some(shares)) = (BOTH, shares.as_deref_mut()) {
                 let share = term.pair_both(&me, &p, &mut acc);

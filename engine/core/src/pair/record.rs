@@ -187,6 +187,11 @@ pub struct Records {
     fields: Fields,
     /// Offset of each field in a record (valid for the fields held).
     offsets: [usize; Field::COUNT],
+    /// Fluid particles: records 0 to `n_fluid` - 1.
+    n_fluid: usize,
+    /// The keyed columns' slots held as +0.0 in every fluid particle's record (a
+    /// column of the walls alone, such as their normals).
+    fluid_zero: Fields,
 }
 
 impl Records {
@@ -204,6 +209,16 @@ impl Records {
     /// The fields held.
     pub fn fields(&self) -> Fields {
         self.fields
+    }
+    /// Fluid particles: records 0 to `n_fluid() - 1`; the ghosts follow.
+    pub fn n_fluid(&self) -> usize {
+        self.n_fluid
+    }
+    /// The keyed columns' slots that every fluid particle's record holds as +0.0, so
+    /// that a group of fluid neighbours need not gather them (a column of the walls
+    /// alone: the wall particles' normals, `WallNormal`).
+    pub fn fluid_zero(&self) -> Fields {
+        self.fluid_zero
     }
     /// Bytes held (capacity), for memory accounting.
     pub fn heap_bytes(&self) -> usize {
@@ -429,6 +444,17 @@ impl Records {
                     }
                 }
             });
+        // Slots cannot be refreshed, so only a new layout changes which are zero.
+        if reshape {
+            let fluid = &values[..n_fluid * stride];
+            let fluid_zero = Field::SLOTS.into_iter().fold(0, |bits, f| {
+                let o = offsets[f as usize];
+                let zero =
+                    held.contains(f) && fluid.par_chunks_exact(stride).all(|r| r[o].to_bits() == 0);
+                bits | (zero as u16) << f as u16
+            });
+            (self.n_fluid, self.fluid_zero) = (n_fluid, Fields(fluid_zero));
+        }
         Ok(())
     }
 }
