@@ -324,6 +324,7 @@ fn execute(scenario: Scenario, opts: &RunOptions) -> Result<ExitCode, CliError> 
         .reference
         .clone()
         .zip(scenario.reference_file());
+    let units = sph_study::reference::ColumnUnits::of(&scenario);
     // A failed step still has a summary to print; any other failure has none.
     let (summary, stopped) = match run(scenario, opts) {
         Ok(summary) => (summary, None),
@@ -357,7 +358,7 @@ fn execute(scenario: Scenario, opts: &RunOptions) -> Result<ExitCode, CliError> 
         let probes = out_dir.join("probes.csv");
         if probes.exists() {
             let report = sph_study::reference::compare_files(spec, file, &probes)?;
-            report.write(out_dir)?;
+            report.write(out_dir, &units)?;
             println!("{} (reference.md)", report.summary());
         }
     }

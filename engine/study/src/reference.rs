@@ -38,6 +38,53 @@ impl Comparison {
     }
 }
 
+/// What a `probes.csv` column measures, for a plot's axis: the scenario's pressure
+/// sensors and wave gauges, by name.
+#[derive(Clone, Debug, Default)]
+pub struct ColumnUnits {
+    sensors: Vec<String>,
+    gauges: Vec<String>,
+}
+
+impl ColumnUnits {
+    /// The pressure sensors and wave gauges named.
+    pub fn new(sensors: Vec<String>, gauges: Vec<String>) -> Self {
+        Self { sensors, gauges }
+    }
+
+    /// Those of `scenario`.
+    pub fn of(scenario: &Scenario) -> Self {
+        Self::new(
+            scenario
+                .spec
+                .pressure_sensors
+                .iter()
+                .map(|s| s.name.clone())
+                .collect(),
+            scenario
+                .spec
+                .wave_gauges
+                .iter()
+                .map(|g| g.name.clone())
+                .collect(),
+        )
+    }
+
+    /// `column` with its unit: a pressure sensor's columns (`P1`, `P1.shepard`,
+    /// `P1.shepard.transducer`) in Pa, a wave gauge's (its free-surface elevation) in
+    /// m; any other column as named.
+    pub fn label(&self, column: &str) -> String {
+        let name = column.split('.').next().unwrap_or(column);
+        if self.sensors.iter().any(|s| s == name) {
+            format!("{column} [Pa]")
+        } else if self.gauges.iter().any(|g| g == name) {
+            format!("{column} [m]")
+        } else {
+            column.to_string()
+        }
+    }
+}
+
 /// What a run's `probes.csv` shows against the scenario's reference.
 #[derive(Clone, Debug)]
 pub struct ReferenceReport {
@@ -145,9 +192,9 @@ impl ReferenceReport {
         md
     }
 
-    /// `reference.md` and `reference_<probe>.png` (run and reference over the window)
-    /// into `dir`, which holds the run's `probes.csv`.
-    pub fn write(&self, dir: &Path) -> Result<(), StudyError> {
+    /// `reference.md` and `reference_<probe>.png` (run and reference over the window,
+    /// the y axis labelled by `units`) into `dir`, which holds the run's `probes.csv`.
+    pub fn write(&self, dir: &Path, units: &ColumnUnits) -> Result<(), StudyError> {
         let md = dir.join("reference.md");
         sph_core::atomic::write_atomic(&md, self.markdown().as_bytes())
             .map_err(|e| StudyError::file(&md, e))?;
@@ -168,7 +215,7 @@ impl ReferenceReport {
                     100.0 * r.nmae
                 ),
                 "t [s]",
-                &r.probe,
+                &units.label(&r.probe),
                 // The reference drawn last, over the run's (often noisier) curve.
                 &[
                     Series {
@@ -186,5 +233,27 @@ impl ReferenceReport {
             .map_err(|e| StudyError::file(&png, e))?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ColumnUnits;
+
+    /// A sensor's columns read in Pa, a gauge's in m, by the name before the first
+    /// dot; a name that only starts like one, or any other column, has no unit.
+    #[test]
+    fn sensors_read_in_pascals_and_gauges_in_metres() {
+        let units = ColumnUnits::new(vec!["P1".into(), "P10".into()], vec!["H2".into()]);
+        assert_eq!(units.label("P1"), "P1 [Pa]");
+        assert_eq!(
+            units.label("P1.shepard.transducer"),
+            "P1.shepard.transducer [Pa]"
+        );
+        assert_eq!(units.label("P10.nearest"), "P10.nearest [Pa]");
+        assert_eq!(units.label("H2"), "H2 [m]");
+        assert_eq!(units.label("P100"), "P100");
+        assert_eq!(units.label("front"), "front");
+        assert_eq!(ColumnUnits::default().label("P1"), "P1");
     }
 }
