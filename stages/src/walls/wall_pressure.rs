@@ -835,6 +835,15 @@ mod tests {
         }
     }
 
+    /// The `WallNormal` column the pair mirror wrote (fluid, then wall particles).
+    fn normals(sim: &Sim) -> &[DVec2] {
+        sim.resources
+            .get::<Columns>()
+            .unwrap()
+            .get::<WallNormal>()
+            .unwrap()
+    }
+
     /// With `pair_mirror` every wall particle near the fluid keeps its wall's velocity
     /// (the fixed box's: 0) and carries its wall's unit normal in the `WallNormal`
     /// column, the fluid and the wall particles beyond its reach a zero there (the
@@ -852,12 +861,7 @@ mod tests {
             column::<Pressure>(ghost).unwrap(),
         );
         let fluid = archetype::<Fluid>(&sim.world).unwrap().len() as usize;
-        let normals = sim
-            .resources
-            .get::<Columns>()
-            .unwrap()
-            .get::<WallNormal>()
-            .unwrap();
+        let normals = normals(&sim);
         assert_eq!(normals.len(), fluid + x.len());
         assert!(normals[..fluid].iter().all(|n| *n == DVec2::ZERO));
         let mut floor = 0;
@@ -913,12 +917,7 @@ mod tests {
                 ),
             ],
         );
-        let normals = sim
-            .resources
-            .get::<Columns>()
-            .unwrap()
-            .get::<WallNormal>()
-            .unwrap();
+        let normals = normals(&sim);
         assert_eq!(normals, &[DVec2::ZERO; 3]);
     }
 
