@@ -210,10 +210,10 @@ fn a_scene_of_the_other_dimension_is_refused_with_the_field() {
 /// first peak (the largest 1 ms mean within 0.1 s of arrival) is within the 25
 /// % here (measured -11.9 %; on mirrors +633 %), and the wall safeguard acts at most 50
 /// times in 2 s (measured 2; 31,070 on mirrors). The peak does not hold at finer
-/// resolution (+45 % at 0.025 m, +119 % at 0.02 m), so this holds the coarse run, not the
-/// acceptance; DFSPH's peak is a one-step pulse, several times the measured one at
-/// every resolution, and is not held (docs/validation.md, "3D", has both per
-/// resolution).
+/// resolution (+45 % at 0.025 m, +119 % at 0.02 m, +59 % at 0.015 m), so this holds the
+/// coarse run, not the acceptance; DFSPH's peak is a one-step pulse, several times the
+/// measured one at every resolution, and is not held (docs/validation.md, "3D", has
+/// both per resolution).
 #[test]
 fn spheric_test2_coarse_heights_and_arrival_match_the_measurements() {
     for scene in TEST2 {
